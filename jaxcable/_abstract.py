@@ -1,0 +1,124 @@
+import abc
+from typing import Generic, TypeVar
+
+import equinox as eqx
+import jax.numpy as jnp
+from jaxtyping import Array, Float, Int
+
+from ._cable import Cable
+from ._results import RESULTS
+
+
+_State = TypeVar("_State")
+
+
+class StrainParts(eqx.Module):
+    """The strain of one sample split by mechanism (dimensionless, elongation / L0).
+
+    `total = instantaneous + creep - recovery_short - recovery_long`. Recovery terms are
+    reported as positive amounts removed from the strain. Models fill the parts they
+    have and leave the others zero.
+
+    **Fields:**
+
+    - `instantaneous`: time-independent part (Park Eq. 1-2 with hardening; the spring of
+        Burgers / five-element / Hooke; the Bouc-Wen loop).
+    - `creep`: time-dependent lengthening (Park Eq. 3 and 5; Kelvin-Voigt elements and
+        dashpot of the linear models).
+    - `recovery_short`: short-term recovery (Park Eq. 4; the first unloading
+        Kelvin-Voigt element of the five-element model).
+    - `recovery_long`: long-term recovery (Park Eq. 7; the second unloading
+        Kelvin-Voigt element of the five-element model).
+    """
+
+    instantaneous: Float[Array, "*shape"]
+    creep: Float[Array, "*shape"]
+    recovery_short: Float[Array, "*shape"]
+    recovery_long: Float[Array, "*shape"]
+
+    @property
+    def total(self) -> Float[Array, "*shape"]:
+        """Total strain, dimensionless."""
+        return (
+            self.instantaneous + self.creep - self.recovery_short - self.recovery_long
+        )
+
+
+def zero_parts(x) -> StrainParts:
+    z = jnp.zeros_like(x)
+    return StrainParts(z, z, z, z)
+
+
+class AbstractCableModel(eqx.Module, Generic[_State]):
+    """A constitutive law of a cable: force history in, strain history out.
+
+    A model is written for one cable and one sample at a time; the drivers
+    ([`jaxcable.simulate_rate_test`][], [`jaxcable.simulate_force_history`][],
+    [`jaxcable.simulate_elongation_history`][], [`jaxcable.step`][]) run it inside one
+    `lax.scan`. Parameters are array fields in SI units, so a model is a PyTree that can
+    be `jax.vmap`-ed over (parameter sets) and differentiated (`eqx.filter_grad`).
+
+    Concrete models implement three methods:
+
+    - `init(cable)`: the state of the unloaded, virgin cable;
+    - `advance(state, cable, dt, force, direction)`: the new state and the strain after
+        a step of `dt` seconds ending at `force`, with the force changing linearly over
+        the step. `direction` is +1 for a loading step, -1 for an unloading step and 0
+        to keep the current branch (holds, rests). `advance` must be a smooth function
+        of `dt` and `force` (the drivers solve for either by Newton's method);
+    - `check(cable)`: a traced domain check of the parameters for this cable.
+    """
+
+    @abc.abstractmethod
+    def init(self, cable: Cable) -> _State:
+        """The state of a new, unloaded cable at time 0.
+
+        **Arguments:**
+
+        - `cable`: the [`jaxcable.Cable`][] (one cable).
+
+        **Returns:**
+
+        The model's state (an `eqx.Module`).
+        """
+
+    @abc.abstractmethod
+    def advance(
+        self,
+        state: _State,
+        cable: Cable,
+        dt: Float[Array, ""],
+        force: Float[Array, ""],
+        direction: Int[Array, ""],
+    ) -> tuple[_State, StrainParts]:
+        """Advance the state by one sample.
+
+        **Arguments:**
+
+        - `state`: the state after the previous sample.
+        - `cable`: the [`jaxcable.Cable`][].
+        - `dt`: duration of the step, s (>= 0).
+        - `force`: cable force at the end of the step, N (linear over the step).
+        - `direction`: +1 loading, -1 unloading, 0 keep the current branch.
+
+        **Returns:**
+
+        `(new_state, parts)` with the [`jaxcable.StrainParts`][] at the end of the step.
+        """
+
+    @abc.abstractmethod
+    def check(self, cable: Cable) -> RESULTS:
+        """Traced check that the parameters are in their domain for `cable`.
+
+        **Returns:**
+
+        `RESULTS.successful` or `RESULTS.parameter_out_of_domain`.
+        """
+
+
+def positive_result(*values) -> RESULTS:
+    """`parameter_out_of_domain` unless every value is finite and positive."""
+    ok = jnp.array(True)
+    for v in values:
+        ok = ok & jnp.all(jnp.isfinite(v) & (v > 0))
+    return RESULTS.where(ok, RESULTS.successful, RESULTS.parameter_out_of_domain)

@@ -1,0 +1,272 @@
+import equinox as eqx
+import jax.numpy as jnp
+from jaxtyping import Array, Float, Int
+
+from ._abstract import AbstractCableModel, StrainParts, positive_result
+from ._cable import Cable
+from ._results import RESULTS
+
+
+def _safe_pow(base, exponent):
+    """`base**exponent` for `base >= 0`, with finite gradients at `base == 0`."""
+    positive = base > 0
+    safe = jnp.where(positive, base, 1.0)
+    return jnp.where(positive, jnp.exp(exponent * jnp.log(safe)), 0.0)
+
+
+def _relaxation_average(t, tau):
+    """(1 - exp(-t / tau)) / t, continued by 1 / tau at t = 0 (finite gradients)."""
+    positive = t > 0
+    t_safe = jnp.where(positive, t, 1.0)
+    return jnp.where(positive, -jnp.expm1(-t_safe / tau) / t_safe, 1.0 / tau)
+
+
+class IntegratedState(eqx.Module):
+    """Scan carry of [`jaxcable.IntegratedModel`][] for one cable (all SI).
+
+    **Fields:**
+
+    - `force`: force of the previous sample, N.
+    - `strain`: total strain of the previous sample (the epsilon_{i-1} of Park Eq. 2).
+    - `impulse`: integral of F dt since the first loading, N s (MODEL_NOTES point 6).
+    - `t_total`: time under tension since the first loading, s.
+    - `branch`: +1 loading, -1 unloading.
+    - `force_reversal`: force where the current branch began (F_f of Park Eq. 9), N.
+    - `inst_reversal`: instantaneous strain where the current branch began.
+    - `tau`: time since the current branch began, s.
+    - `set_strain`: instantaneous strain offset accumulated at reloading reversals.
+    - `recovered_short`, `recovered_long`: recovery frozen at reloading reversals.
+    - `parts`: the [`jaxcable.StrainParts`][] of the previous sample.
+    """
+
+    force: Float[Array, ""]
+    strain: Float[Array, ""]
+    impulse: Float[Array, ""]
+    t_total: Float[Array, ""]
+    branch: Int[Array, ""]
+    force_reversal: Float[Array, ""]
+    inst_reversal: Float[Array, ""]
+    tau: Float[Array, ""]
+    set_strain: Float[Array, ""]
+    recovered_short: Float[Array, ""]
+    recovered_long: Float[Array, ""]
+    parts: StrainParts
+
+
+class IntegratedModel(AbstractCableModel[IntegratedState]):
+    r"""Park et al.'s integrated nonlinear dynamic model of a polymer cable.
+
+    Strain (dimensionless) of sample i, with A the cross-section, I = \int F dt and
+    T the time under tension since the first loading (MODEL_NOTES points 2-7):
+
+    - loading (Park Eq. 9, first case, with the creep sign read as + and the dashpot
+      term as I / (eta0 A)):
+      eps = (F / (E1c A))**h + (I / T) (1 - exp(-T / t_c)) / (E2c A) + I / (eta0 A),
+      with the hardening exponent h = 1 + beta * eps_{i-1}**gamma (Park Eq. 1-2);
+    - unloading (Park Eq. 9, second case), from the force F_f where unloading began and
+      the time tau since then: the instantaneous strain falls by (F_f - F) / (E1r A),
+      creep keeps its equivalent-force form (Eq. 5), and two recoveries are removed:
+      short-term (I / T) (1 - exp(-tau / t_r1)) / (E2r A) (Eq. 4-5) and long-term
+      (F_f - F) (1 - exp(-tau / t_r2)) / (E3r A) (Eq. 7) with the rate-dependent
+      retardation time t_r2 = lambda1 / (v / L0)**2 - lambda2 (Eq. 8).
+
+    The strain is continuous at every load reversal: at a reloading reversal the
+    recovery reached so far is kept (frozen) and the difference between the unloading
+    and loading instantaneous laws becomes a permanent set. Hysteresis is not modelled
+    separately: it emerges from creep, hardening and recovery (Park Section 3.3).
+
+    The equivalent force I / T replaces the hereditary integral of the Kelvin-Voigt
+    creep (MODEL_NOTES point 4); this is the paper's model, kept as printed.
+
+    The default parameters are a Dyneema SK78 3 mm set obtained as MODEL_NOTES point 9
+    describes (see `notebooks/01_papers.ipynb` and `jaxcable.sk78_calibration`).
+
+    **Fields (SI):**
+
+    - `E1c`: static (instantaneous) loading modulus, Pa (Eq. 1).
+    - `beta`, `gamma`: hardening parameters, dimensionless (Eq. 2).
+    - `E1r`: instantaneous unloading modulus, Pa (Eq. 9).
+    - `E2c`: Kelvin-Voigt creep modulus, Pa; `t_c`: creep retardation time, s (Eq. 3).
+    - `eta0`: dashpot viscosity, Pa s (Eq. 3).
+    - `E2r`: short-term recovery modulus, Pa; `t_r1`: its retardation time, s (Eq. 4).
+    - `E3r`: long-term recovery modulus, Pa (Eq. 7).
+    - `lambda1` (1/s), `lambda2` (s): long-term retardation time law (Eq. 8).
+    """
+
+    E1c: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=2.2e9)
+    beta: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.3)
+    gamma: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.5)
+    E1r: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=2.5e9)
+    E2c: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=3.7e8)
+    t_c: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=100.0)
+    eta0: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=1.6e11)
+    E2r: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=1.5e9)
+    t_r1: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=60.0)
+    E3r: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=6.0e8)
+    lambda1: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=7.8e-3)
+    lambda2: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=2.1e4)
+
+    def __check_init__(self):
+        import jax
+
+        import numpy as np
+
+        for name in (
+            "E1c",
+            "E1r",
+            "E2c",
+            "t_c",
+            "eta0",
+            "E2r",
+            "t_r1",
+            "E3r",
+            "lambda1",
+        ):
+            value = getattr(self, name)
+            if isinstance(value, jax.core.Tracer):
+                continue
+            v = np.asarray(value)
+            if v.dtype == object or not np.all(np.isfinite(v)) or not np.all(v > 0):
+                raise ValueError(
+                    f"IntegratedModel `{name}` must be finite and positive, got {v}."
+                )
+        for name in ("beta", "gamma", "lambda2"):
+            value = getattr(self, name)
+            if isinstance(value, jax.core.Tracer):
+                continue
+            v = np.asarray(value)
+            if not np.all(np.isfinite(v)):
+                raise ValueError(f"IntegratedModel `{name}` must be finite, got {v}.")
+        for name in ("beta", "gamma"):
+            value = getattr(self, name)
+            if not isinstance(value, jax.core.Tracer) and np.any(np.asarray(value) < 0):
+                raise ValueError(
+                    f"IntegratedModel `{name}` must be >= 0 (h >= 1 hardens, Park "
+                    f"Eq. 2), got {np.asarray(value)}."
+                )
+
+    def retardation_time_long(self, cable: Cable) -> Float[Array, ""]:
+        """Long-term retardation time t_r2 = lambda1 (L0 / v)^2 - lambda2, s (Eq. 8)."""
+        return self.lambda1 / cable.strain_rate**2 - self.lambda2
+
+    def check(self, cable: Cable) -> RESULTS:
+        result = positive_result(
+            self.E1c,
+            self.E1r,
+            self.E2c,
+            self.t_c,
+            self.eta0,
+            self.E2r,
+            self.t_r1,
+            self.E3r,
+            self.retardation_time_long(cable),
+        )
+        # Eq. 1 stiffens only while F < E1c A; above it h > 1 would soften the cable.
+        ok = (
+            (self.beta >= 0)
+            & (self.gamma >= 0)
+            & (self.E1c * cable.area > cable.breaking_load)
+        )
+        return RESULTS.where(ok, result, RESULTS.parameter_out_of_domain)
+
+    def init(self, cable: Cable) -> IntegratedState:
+        zero = jnp.zeros((), jnp.result_type(float, self.E1c, cable.length))
+        parts = StrainParts(zero, zero, zero, zero)
+        return IntegratedState(
+            force=zero,
+            strain=zero,
+            impulse=zero,
+            t_total=zero,
+            branch=jnp.array(1, jnp.int32),
+            force_reversal=zero,
+            inst_reversal=zero,
+            tau=zero,
+            set_strain=zero,
+            recovered_short=zero,
+            recovered_long=zero,
+            parts=parts,
+        )
+
+    def _static_loading(self, state, cable, force):
+        # Park Eq. 1-2: hardening exponent from the previous sample's total strain.
+        h = 1.0 + self.beta * _safe_pow(jnp.maximum(state.strain, 0.0), self.gamma)
+        return _safe_pow(force / (self.E1c * cable.area), h)
+
+    def advance(
+        self,
+        state: IntegratedState,
+        cable: Cable,
+        dt: Float[Array, ""],
+        force: Float[Array, ""],
+        direction: Int[Array, ""],
+    ) -> tuple[IntegratedState, StrainParts]:
+        area = cable.area
+        branch = jnp.where(direction == 0, state.branch, direction).astype(jnp.int32)
+        reversed_ = branch != state.branch
+        to_unloading = reversed_ & (branch < 0)
+        to_loading = reversed_ & (branch > 0)
+
+        # A reversal happens at the previous sample; freeze what the old branch reached.
+        prev = state.parts
+        force_reversal = jnp.where(reversed_, state.force, state.force_reversal)
+        inst_reversal = jnp.where(reversed_, prev.instantaneous, state.inst_reversal)
+        recovered_short = jnp.where(
+            to_loading, state.recovered_short + prev.recovery_short, state.recovered_short
+        )
+        recovered_long = jnp.where(
+            to_loading, state.recovered_long + prev.recovery_long, state.recovered_long
+        )
+        # At reloading the loading law restarts from the unloading branch's
+        # instantaneous strain; the difference is a permanent set (strain continuity).
+        loading_at_reversal = self._static_loading(state, cable, state.force)
+        set_strain = jnp.where(
+            to_loading,
+            prev.instantaneous - loading_at_reversal,
+            state.set_strain,
+        )
+        del to_unloading
+        tau = jnp.where(reversed_, 0.0, state.tau) + dt
+
+        # Trapezoid impulse (MODEL_NOTES point 5); time under tension (point 6).
+        impulse = state.impulse + 0.5 * (state.force + force) * dt
+        t_total = state.t_total + jnp.where(state.force + force > 0, dt, 0.0)
+
+        loading_inst = self._static_loading(state, cable, force) + set_strain
+        unloading_inst = inst_reversal - (force_reversal - force) / (self.E1r * area)
+        loading = branch > 0
+        inst = jnp.where(loading, loading_inst, unloading_inst)
+
+        # Park Eq. 5 with MODEL_NOTES point 2: F_eq (1 - e^{-T/t_c}) / (E2c A) + I/(eta0 A).
+        creep = impulse * _relaxation_average(t_total, self.t_c) / (
+            self.E2c * area
+        ) + impulse / (self.eta0 * area)
+
+        f_eq = impulse / jnp.where(t_total > 0, t_total, 1.0)
+        short = f_eq * -jnp.expm1(-tau / self.t_r1) / (self.E2r * area)
+        t_r2 = self.retardation_time_long(cable)
+        long = (force_reversal - force) * -jnp.expm1(-tau / t_r2) / (self.E3r * area)
+        short = jnp.where(loading, 0.0, short)
+        long = jnp.where(loading, 0.0, long)
+
+        parts = StrainParts(
+            instantaneous=inst,
+            creep=creep,
+            recovery_short=recovered_short + short,
+            recovery_long=recovered_long + long,
+        )
+        current = StrainParts(inst, creep, short, long)
+        new_state = IntegratedState(
+            force=force,
+            strain=parts.total,
+            impulse=impulse,
+            t_total=t_total,
+            branch=branch,
+            force_reversal=force_reversal,
+            inst_reversal=inst_reversal,
+            tau=tau,
+            set_strain=set_strain,
+            recovered_short=recovered_short,
+            recovered_long=recovered_long,
+            parts=current,
+        )
+        return new_state, parts

@@ -1,0 +1,547 @@
+from collections.abc import Callable
+from typing import Any
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import jax.tree_util as jtu
+import numpy as np
+import optimistix as optx
+from jaxtyping import Array, ArrayLike, Bool, Float, Int, PyTree
+
+from . import _checks
+from ._abstract import AbstractCableModel, StrainParts
+from ._cable import Cable, check_scalar_cable
+from ._protocol import Protocol
+from ._results import RESULTS
+
+
+# Incremented each time a kernel is traced; tests use it to show that a repeated call
+# with the same shapes does not retrace.
+TRACE_COUNTS: dict[str, int] = {"rate": 0, "force": 0, "elongation": 0}
+
+_MAX_NEWTON_STEPS = 32
+
+
+class Trajectory(eqx.Module):
+    """A simulated strain history (one cable; a leading batch axis when vmapped).
+
+    **Fields:**
+
+    - `time`: time of each sample, s.
+    - `force`: cable force, N.
+    - `strain`: total strain (elongation / L0), dimensionless.
+    - `elongation`: elongation, m.
+    - `parts`: the strain split into instantaneous, creep and short- and long-term
+        recovery ([`jaxcable.StrainParts`][]).
+    - `mask`: False at padding samples (their values repeat the last valid sample).
+    - `result`: a [`jaxcable.RESULTS`][]: `successful`, or the first failure.
+    """
+
+    time: Float[Array, "*batch samples"]
+    force: Float[Array, "*batch samples"]
+    strain: Float[Array, "*batch samples"]
+    elongation: Float[Array, "*batch samples"]
+    parts: StrainParts
+    mask: Bool[Array, "*batch samples"]
+    result: RESULTS
+
+    @property
+    def instantaneous(self):
+        return self.parts.instantaneous
+
+    @property
+    def creep(self):
+        return self.parts.creep
+
+    @property
+    def recovery_short(self):
+        return self.parts.recovery_short
+
+    @property
+    def recovery_long(self):
+        return self.parts.recovery_long
+
+
+class CableState(eqx.Module):
+    """The driver-level state of one simulated cable: a model's state plus the last
+    sample's time (s), force (N) and strain, and the first failure so far.
+
+    This is the carry of every simulation's `lax.scan`, and what [`jaxcable.step`][]
+    takes and returns inside a user's own scan or controller.
+    """
+
+    model_state: PyTree
+    time: Float[Array, ""]
+    force: Float[Array, ""]
+    strain: Float[Array, ""]
+    result: RESULTS
+
+
+def init_state(
+    model: AbstractCableModel, cable: Cable, time: ArrayLike = 0.0
+) -> CableState:
+    """The state of a new, unloaded cable at `time` (s).
+
+    **Arguments:**
+
+    - `model`: any [`jaxcable.AbstractCableModel`][].
+    - `cable`: the [`jaxcable.Cable`][].
+    - `time`: the time of the initial state, s.
+
+    **Returns:**
+
+    A [`jaxcable.CableState`][].
+    """
+    model_state = model.init(cable)
+    dtype = jnp.result_type(float, cable.length)
+    zero = jnp.zeros((), dtype)
+    return CableState(
+        model_state=model_state,
+        time=jnp.asarray(time, dtype),
+        force=zero,
+        strain=zero,
+        result=model.check(cable),
+    )
+
+
+def _select(pred, new, old):
+    return jtu.tree_map(lambda a, b: jnp.where(pred, a, b), new, old)
+
+
+def _first_failure(old: RESULTS, new: RESULTS) -> RESULTS:
+    return RESULTS.where(old == RESULTS.successful, new, old)
+
+
+def _commit(
+    carry: CableState,
+    model_state,
+    parts: StrainParts,
+    time,
+    force,
+    step_result: RESULTS,
+    mask,
+) -> tuple[CableState, Any]:
+    strain = parts.total
+    step_result = RESULTS.where(
+        jnp.isfinite(strain), step_result, RESULTS.nonphysical_strain
+    )
+    new = CableState(
+        model_state=model_state,
+        time=time,
+        force=force,
+        strain=strain,
+        result=_first_failure(carry.result, step_result),
+    )
+    new = _select(mask, new, carry)
+    return new, new
+
+
+def _default_solver(dtype, *, units: str) -> optx.AbstractRootFinder:
+    double = jnp.dtype(dtype) == jnp.float64
+    if units == "time":
+        # Residual and unknown in seconds (MODEL_NOTES point 5).
+        tol = (1e-10, 1e-10) if double else (2e-5, 1e-5)
+    else:
+        # Residual in strain, unknown in N.
+        tol = (1e-10, 1e-13) if double else (2e-5, 1e-9)
+    return optx.Newton(rtol=tol[0], atol=tol[1])
+
+
+def step(
+    model: AbstractCableModel,
+    cable: Cable,
+    state: CableState,
+    time: Float[ArrayLike, ""],
+    force: Float[ArrayLike, ""],
+    *,
+    reversal_tolerance: float = 0.0,
+) -> tuple[CableState, StrainParts]:
+    """Advance one cable by one time-stamped force sample (no solve).
+
+    A pure function for a user's own `lax.scan`, a controller, `jit`, `vmap` or
+    `grad`. The branch (loading/unloading) follows the sign of the force change; a
+    change smaller than `reversal_tolerance` (N) keeps the current branch.
+
+    **Arguments:**
+
+    - `model`: any [`jaxcable.AbstractCableModel`][].
+    - `cable`: the [`jaxcable.Cable`][].
+    - `state`: the [`jaxcable.CableState`][] after the previous sample.
+    - `time`: time of this sample, s (>= `state.time`).
+    - `force`: force of this sample, N.
+
+    **Returns:**
+
+    `(new_state, parts)`: the new [`jaxcable.CableState`][] and the
+    [`jaxcable.StrainParts`][] of this sample (strain = `parts.total`).
+    """
+    time = jnp.asarray(time, state.time.dtype)
+    force = jnp.asarray(force, state.force.dtype)
+    new, parts = _force_step(
+        model, cable, state, time, force, jnp.array(True), reversal_tolerance
+    )
+    return new, parts
+
+
+def _direction(delta, tolerance) -> Int[Array, ""]:
+    return jnp.where(delta > tolerance, 1, jnp.where(delta < -tolerance, -1, 0)).astype(
+        jnp.int32
+    )
+
+
+def _force_step(model, cable, carry: CableState, time, force, mask, tolerance):
+    dt = time - carry.time
+    direction = _direction(force - carry.force, tolerance)
+    model_state, parts = model.advance(carry.model_state, cable, dt, force, direction)
+    ok = (dt >= 0) & jnp.isfinite(dt)
+    step_result = RESULTS.where(ok, RESULTS.successful, RESULTS.nonphysical_time)
+    step_result = RESULTS.where(
+        (force >= 0) & jnp.isfinite(force), step_result, RESULTS.nonphysical_force
+    )
+    new, _ = _commit(carry, model_state, parts, time, force, step_result, mask)
+    parts = _select(mask, parts, _parts_of(carry, parts))
+    return new, parts
+
+
+def _parts_of(carry: CableState, like: StrainParts) -> StrainParts:
+    # Padding samples repeat the last strain; its split is not needed bit-exact.
+    z = jnp.zeros_like(like.instantaneous)
+    return StrainParts(carry.strain, z, z, z)
+
+
+def _trajectory(cable, outs, parts, result, throw) -> Trajectory:
+    states, mask = outs
+    traj = Trajectory(
+        time=states.time,
+        force=states.force,
+        strain=states.strain,
+        elongation=states.strain * cable.length,
+        parts=parts,
+        mask=mask,
+        result=result,
+    )
+    if throw:
+        traj = result.error_if(traj, result != RESULTS.successful)
+    return traj
+
+
+# ----------------------------------------------------------------------------------
+# Time-stamped force history (a robot's log): no solve.
+
+
+@eqx.filter_jit
+def _force_kernel(model, cable, time, force, mask, tolerance, throw):
+    TRACE_COUNTS["force"] += 1
+    carry = init_state(model, cable, time[0])
+
+    def body(carry, x):
+        t, f, m = x
+        new, parts = _force_step(model, cable, carry, t, f, m, tolerance)
+        return new, (new, m, parts)
+
+    final, (states, masks, parts) = jax.lax.scan(body, carry, (time, force, mask))
+    return _trajectory(cable, (states, masks), parts, final.result, throw)
+
+
+def simulate_force_history(
+    model: AbstractCableModel,
+    cable: Cable,
+    time: Float[ArrayLike, " samples"],
+    force: Float[ArrayLike, " samples"],
+    *,
+    mask: Bool[ArrayLike, " samples"] | None = None,
+    reversal_tolerance: float = 0.0,
+    throw: bool = True,
+) -> Trajectory:
+    """Simulate a time-stamped force history, as a robot logs it.
+
+    The force is linear between samples; the branch follows the sign of the force
+    change. The first sample is the initial condition reached from the unloaded cable
+    at `time[0]` (a nonzero `force[0]` is applied instantly).
+
+    **Arguments:**
+
+    - `model`: any [`jaxcable.AbstractCableModel`][].
+    - `cable`: the [`jaxcable.Cable`][] (one cable; `jax.vmap` for a batch).
+    - `time`: sample times, s, strictly increasing.
+    - `force`: cable force at each sample, N, 0 <= force <= `cable.breaking_load`.
+    - `mask`: optional, False marks padding samples (histories of different lengths
+        in one vmapped batch); they leave the state unchanged.
+    - `reversal_tolerance`: a force change smaller than this (N) keeps the branch.
+    - `throw`: raise on failure (default). With `throw=False` the failure is returned
+        in `Trajectory.result` (per cable under vmap).
+
+    **Returns:**
+
+    A [`jaxcable.Trajectory`][].
+    """
+    time, force, mask = _check_history(cable, time, force, mask, "force")
+    return _force_kernel(model, cable, time, force, mask, reversal_tolerance, throw)
+
+
+def _check_history(cable, time, x, mask, xname):
+    if _checks.is_concrete(cable):
+        check_scalar_cable(cable)
+    if _checks.is_concrete(time, x, mask):
+        time = _checks.require_samples("time", time)
+        x = _checks.require_samples(xname, x)
+        if mask is not None:
+            mask = _checks.require_samples("mask", mask)
+        _checks.require_same_shape(time=time, **{xname: x}, mask=mask)
+        m = None if mask is None else np.asarray(mask, bool)
+        _checks.require_finite("time", time if m is None else np.asarray(time)[m])
+        _checks.require_finite(xname, x if m is None else np.asarray(x)[m])
+        _checks.require_increasing("time", time, m)
+        if xname == "force":
+            _checks.require_positive("force", x, allow_zero=True)
+            if _checks.is_concrete(cable.breaking_load):
+                _checks.require_below(
+                    "force", x, cable.breaking_load, "breaking load"
+                )
+    dtype = jnp.result_type(float, cable.length)
+    time = jnp.asarray(time, dtype)
+    x = jnp.asarray(x, dtype)
+    mask = jnp.ones(time.shape, bool) if mask is None else jnp.asarray(mask, bool)
+    return time, x, mask
+
+
+# ----------------------------------------------------------------------------------
+# Rate-driven test: the time of each force sample is solved by Newton.
+
+
+class _TimeProblem(eqx.Module):
+    model: AbstractCableModel
+    cable: Cable
+    carry: CableState
+    force: Float[Array, ""]
+    direction: Int[Array, ""]
+    duration: Float[Array, ""]
+
+
+def _time_residual(dt, problem: _TimeProblem):
+    """Park Eq. 5 = Eq. 6 along one ramp: model strain minus crosshead strain, in s."""
+    c = problem.carry
+    rate = problem.cable.strain_rate
+    _, parts = problem.model.advance(
+        c.model_state, problem.cable, dt, problem.force, problem.direction
+    )
+    ramp = problem.direction != 0
+    sign = jnp.where(ramp, problem.direction, 1)
+    kinematic = c.strain + sign * rate * dt
+    return jnp.where(ramp, (parts.total - kinematic) / rate, dt - problem.duration)
+
+
+def _rate_step(model, cable, carry: CableState, x, solver):
+    force, direction, duration, mask = x
+    problem = _TimeProblem(model, cable, carry, force, direction, duration)
+    # Initial guess: the time the instantaneous strain step alone takes at speed v;
+    # for a hold, its duration.
+    r0 = _time_residual(jnp.zeros_like(duration), problem)
+    guess = jnp.where(direction != 0, jnp.abs(r0), duration)
+    sol = optx.root_find(
+        _time_residual,
+        solver,
+        guess,
+        args=problem,
+        options=dict(lower=jnp.zeros_like(guess)),
+        max_steps=_MAX_NEWTON_STEPS,
+        throw=False,
+    )
+    dt = sol.value
+    step_result = RESULTS.where(
+        sol.result == optx.RESULTS.successful,
+        RESULTS.successful,
+        RESULTS.newton_failed,
+    )
+    step_result = RESULTS.where(
+        (dt >= 0) & jnp.isfinite(dt), step_result, RESULTS.nonphysical_time
+    )
+    model_state, parts = model.advance(carry.model_state, cable, dt, force, direction)
+    new, _ = _commit(carry, model_state, parts, carry.time + dt, force, step_result, mask)
+    parts = _select(mask, parts, _parts_of(carry, parts))
+    return new, parts
+
+
+@eqx.filter_jit
+def _rate_kernel(model, cable, protocol: Protocol, solver, throw):
+    TRACE_COUNTS["rate"] += 1
+    carry = init_state(model, cable)
+    dtype = carry.strain.dtype
+    if solver is None:
+        solver = _default_solver(dtype, units="time")
+    xs = (
+        jnp.asarray(protocol.force, dtype),
+        jnp.asarray(protocol.direction, jnp.int32),
+        jnp.asarray(protocol.duration, dtype),
+        jnp.asarray(protocol.mask, bool),
+    )
+
+    def body(carry, x):
+        new, parts = _rate_step(model, cable, carry, x, solver)
+        return new, (new, x[3], parts)
+
+    final, (states, masks, parts) = jax.lax.scan(body, carry, xs)
+    return _trajectory(cable, (states, masks), parts, final.result, throw)
+
+
+def simulate_rate_test(
+    model: AbstractCableModel,
+    cable: Cable,
+    protocol: Protocol,
+    *,
+    solver: optx.AbstractRootFinder | None = None,
+    throw: bool = True,
+) -> Trajectory:
+    """Simulate a rate-driven test, as a tensile tester runs it (Park Section 4).
+
+    The crosshead moves at `cable.speed`, so along each ramp the strain follows
+    eps_kin(t) = eps_start +/- (v / L0) (t - t_start) (Park Eq. 6). The time t_i at
+    which each force sample is reached is the root of model strain minus eps_kin
+    (Park Eq. 5 = Eq. 6), found per sample by Newton's method (optimistix) inside the
+    scan, vectorised under `vmap` and differentiated by the implicit function theorem.
+
+    **Arguments:**
+
+    - `model`: any [`jaxcable.AbstractCableModel`][].
+    - `cable`: the [`jaxcable.Cable`][] (one cable; `jax.vmap` for a batch).
+    - `protocol`: the [`jaxcable.Protocol`][] (ramps, holds, rests).
+    - `solver`: optional optimistix root finder (default `optx.Newton` with
+        tolerances in seconds set by the dtype).
+    - `throw`: raise on failure (default); `throw=False` returns the status in
+        `Trajectory.result`.
+
+    **Returns:**
+
+    A [`jaxcable.Trajectory`][] whose `time` holds the solved sample times, s.
+    """
+    if not isinstance(protocol, Protocol):
+        raise ValueError(
+            f"`protocol` must be a jaxcable.Protocol, got {type(protocol).__name__}."
+        )
+    if _checks.is_concrete(cable):
+        check_scalar_cable(cable)
+        if _checks.is_concrete(protocol.force):
+            if jnp.ndim(protocol.force) != 1:
+                raise ValueError(
+                    f"`protocol.force` must be 1-dimensional, got shape "
+                    f"{jnp.shape(protocol.force)}; vmap over a batch of protocols."
+                )
+            _checks.require_below(
+                "protocol.force", protocol.force, cable.breaking_load, "breaking load"
+            )
+    return _rate_kernel(model, cable, protocol, solver, throw)
+
+
+# ----------------------------------------------------------------------------------
+# Time-stamped elongation history (displacement control): the force is solved.
+
+
+class _ForceProblem(eqx.Module):
+    model: AbstractCableModel
+    cable: Cable
+    carry: CableState
+    dt: Float[Array, ""]
+    target: Float[Array, ""]
+    direction: Int[Array, ""]
+
+
+def _force_residual(force, problem: _ForceProblem):
+    c = problem.carry
+    _, parts = problem.model.advance(
+        c.model_state, problem.cable, problem.dt, force, problem.direction
+    )
+    return parts.total - problem.target
+
+
+def _elongation_step(model, cable, carry: CableState, x, solver):
+    time, elongation, mask = x
+    target = elongation / cable.length
+    dt = time - carry.time
+    direction = _direction(target - carry.strain, 0.0)
+    problem = _ForceProblem(model, cable, carry, dt, target, direction)
+    # Slack: an imposed length below the zero-force length leaves the cable unloaded.
+    zero = jnp.zeros_like(target)
+    slack = _force_residual(zero, problem) >= 0
+    # Initial guess from the local compliance at the previous force (Newton's first
+    # step taken by hand with a floor, since the hardening law has zero slope at 0 N).
+    f_prev = jnp.maximum(carry.force, 1e-3 * cable.breaking_load)
+    r_prev, compliance = jax.jvp(
+        lambda f: _force_residual(f, problem), (f_prev,), (jnp.ones_like(f_prev),)
+    )
+    guess = jnp.clip(
+        f_prev - r_prev / compliance, 1e-6 * cable.breaking_load, cable.breaking_load
+    )
+    sol = optx.root_find(
+        _force_residual,
+        solver,
+        guess,
+        args=problem,
+        options=dict(lower=zero),
+        max_steps=_MAX_NEWTON_STEPS,
+        throw=False,
+    )
+    force = jnp.where(slack, zero, sol.value)
+    converged = slack | (sol.result == optx.RESULTS.successful)
+    step_result = RESULTS.where(converged, RESULTS.successful, RESULTS.newton_failed)
+    step_result = RESULTS.where(
+        (force >= 0) & jnp.isfinite(force), step_result, RESULTS.nonphysical_force
+    )
+    model_state, parts = model.advance(carry.model_state, cable, dt, force, direction)
+    new, _ = _commit(carry, model_state, parts, time, force, step_result, mask)
+    parts = _select(mask, parts, _parts_of(carry, parts))
+    return new, parts
+
+
+@eqx.filter_jit
+def _elongation_kernel(model, cable, time, elongation, mask, solver, throw):
+    TRACE_COUNTS["elongation"] += 1
+    carry = init_state(model, cable, time[0])
+    if solver is None:
+        solver = _default_solver(carry.strain.dtype, units="force")
+
+    def body(carry, x):
+        new, parts = _elongation_step(model, cable, carry, x, solver)
+        return new, (new, x[2], parts)
+
+    final, (states, masks, parts) = jax.lax.scan(
+        body, carry, (time, elongation, mask)
+    )
+    return _trajectory(cable, (states, masks), parts, final.result, throw)
+
+
+def simulate_elongation_history(
+    model: AbstractCableModel,
+    cable: Cable,
+    time: Float[ArrayLike, " samples"],
+    elongation: Float[ArrayLike, " samples"],
+    *,
+    mask: Bool[ArrayLike, " samples"] | None = None,
+    solver: optx.AbstractRootFinder | None = None,
+    throw: bool = True,
+) -> Trajectory:
+    """Simulate a time-stamped elongation history (displacement control, e.g. a
+    relaxation test): the force of each sample is solved by Newton's method.
+
+    The branch follows the sign of the imposed elongation change; a hold keeps it.
+    Where the imposed length is below the cable's zero-force length the cable is
+    slack: the force is 0 and the strain is the model's free strain.
+
+    **Arguments:**
+
+    - `model`: any [`jaxcable.AbstractCableModel`][].
+    - `cable`: the [`jaxcable.Cable`][].
+    - `time`: sample times, s, strictly increasing.
+    - `elongation`: imposed elongation, m.
+    - `mask`, `solver`, `throw`: as in [`jaxcable.simulate_rate_test`][].
+
+    **Returns:**
+
+    A [`jaxcable.Trajectory`][] whose `force` holds the solved forces, N.
+    """
+    time, elongation, mask = _check_history(cable, time, elongation, mask, "elongation")
+    return _elongation_kernel(model, cable, time, elongation, mask, solver, throw)
+
+
+def _unused(_: Callable) -> None:  # pragma: no cover
+    pass
