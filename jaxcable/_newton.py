@@ -1,0 +1,101 @@
+from collections.abc import Callable
+from typing import Any
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import optimistix as optx
+from jaxtyping import Array, Bool, Float
+
+
+class Newton(eqx.Module):
+    """Newton–Raphson for the scalar root of each sample, built for the scan.
+
+    The per-sample problems of jaxcable (the loading time of a force sample, Park
+    Eq. 5-6; the force of an imposed elongation) are scalar and smooth, and a good
+    initial guess is known, so Newton converges in two or three steps. This solver
+    takes `unrolled` steps without a loop (cheap under `vmap`, where a
+    `lax.while_loop` costs a batched predicate per iteration), then continues in a
+    `lax.while_loop` only while some sample is unconverged, up to `max_steps`.
+    Derivatives are taken by the implicit function theorem (`jax.lax.custom_root`),
+    never through the iterations.
+
+    Any optimistix root finder (e.g. `optx.Newton(rtol, atol)`) can be passed
+    instead, where a simulation takes `solver=`; it runs through `optx.root_find`
+    (with its `ImplicitAdjoint`) on the same relative residual, and is slower inside
+    the scan.
+
+    **Arguments:**
+
+    - `tol`: convergence when |residual| <= tol. jaxcable's residuals are relative
+        strain errors (dimensionless), so `tol` is a relative accuracy of the strain;
+        a few float32 epsilons at most in single precision.
+    - `max_steps`: the most Newton steps in all; beyond it the sample is flagged
+        `RESULTS.newton_failed`.
+    - `unrolled`: Newton steps taken before the convergence loop.
+    """
+
+    tol: float
+    max_steps: int = 32
+    unrolled: int = 3
+
+
+def root_scalar(
+    fn: Callable[[Float[Array, ""], Any], Float[Array, ""]],
+    solver: Newton | optx.AbstractRootFinder,
+    guess: Float[Array, ""],
+    args: Any,
+    lower: Float[Array, ""],
+) -> tuple[Float[Array, ""], Bool[Array, ""]]:
+    """Solve fn(y, args) = 0 for a scalar y >= lower; returns (y, converged)."""
+    if isinstance(solver, optx.AbstractRootFinder):
+        sol = optx.root_find(
+            fn,
+            solver,
+            guess,
+            args=args,
+            options=dict(lower=lower),
+            max_steps=256,
+            throw=False,
+        )
+        return sol.value, sol.result == optx.RESULTS.successful
+    if not isinstance(solver, Newton):
+        raise ValueError(
+            "`solver` must be a jaxcable.Newton or an optimistix root finder, got "
+            f"{type(solver).__name__}."
+        )
+
+    def newton_step(f, y):
+        r, slope = jax.jvp(f, (y,), (jnp.ones_like(y),))
+        y_new = jnp.maximum(y - r / slope, lower)
+        return y_new, r
+
+    def converged(y, y_prev, r):
+        del y_prev
+        return jnp.abs(r) <= solver.tol
+
+    def solve(f, y0):
+        y_prev, y, r = y0, y0, jnp.full_like(y0, jnp.inf)
+        for _ in range(solver.unrolled):
+            y_prev = y
+            y, r = newton_step(f, y)
+
+        def cond(c):
+            y, y_prev, r, k = c
+            return (k < solver.max_steps) & ~converged(y, y_prev, r)
+
+        def body(c):
+            y, _, _, k = c
+            y_new, r = newton_step(f, y)
+            return y_new, y, r, k + 1
+
+        init = (y, y_prev, r, jnp.array(solver.unrolled))
+        y, y_prev, r, _ = jax.lax.while_loop(cond, body, init)
+        return y, converged(y, y_prev, r) & jnp.isfinite(y)
+
+    def tangent_solve(g, y):
+        return y / g(jnp.ones_like(y))
+
+    return jax.lax.custom_root(
+        lambda y: fn(y, args), guess, solve, tangent_solve, has_aux=True
+    )
