@@ -6,6 +6,7 @@ from ._integrated import (
     IntegratedModel as IntegratedModel,
     IntegratedState as IntegratedState,
 )
+from ._newton import Newton as Newton
 from ._protocol import Protocol as Protocol
 from ._results import RESULTS as RESULTS
 from ._simulate import (
