@@ -7,7 +7,9 @@ import numpy as np
 
 
 def is_concrete(*xs) -> bool:
-    return not any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(xs))
+    return not any(
+        isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(xs)
+    )
 
 
 def _show(v) -> str:

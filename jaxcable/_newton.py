@@ -67,7 +67,11 @@ def root_scalar(
 
     def newton_step(f, y):
         r, slope = jax.jvp(f, (y,), (jnp.ones_like(y),))
-        y_new = jnp.maximum(y - r / slope, lower)
+        # A flat or non-finite slope (e.g. the hardening law at 0 N) gives no step;
+        # the sample is then reported unconverged instead of carrying a NaN.
+        step = r / jnp.where(slope == 0, 1.0, slope)
+        ok = (slope != 0) & jnp.isfinite(step)
+        y_new = jnp.maximum(jnp.where(ok, y - step, y), lower)
         return y_new, r
 
     def converged(y, y_prev, r):
@@ -91,11 +95,18 @@ def root_scalar(
 
         init = (y, y_prev, r, jnp.array(solver.unrolled))
         y, y_prev, r, _ = jax.lax.while_loop(cond, body, init)
-        return y, converged(y, y_prev, r) & jnp.isfinite(y)
+        # A float flag: custom_root gives aux a tangent, which a bool cannot have.
+        ok = converged(y, y_prev, r) & jnp.isfinite(y)
+        return y, ok.astype(y.dtype)
 
     def tangent_solve(g, y):
-        return y / g(jnp.ones_like(y))
+        # A zero slope only occurs where the caller discards the root (e.g. a slack
+        # cable); keep its tangent finite so that `jnp.where` does not leak NaNs.
+        slope = g(jnp.ones_like(y))
+        bad = (slope == 0) | ~jnp.isfinite(slope)
+        return y / jnp.where(bad, 1.0, slope)
 
-    return jax.lax.custom_root(
+    y, ok = jax.lax.custom_root(
         lambda y: fn(y, args), guess, solve, tangent_solve, has_aux=True
     )
+    return y, jax.lax.stop_gradient(ok) > 0.5

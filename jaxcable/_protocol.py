@@ -78,7 +78,9 @@ class Protocol(eqx.Module):
         if samples < 1:
             raise ValueError(f"`samples` must be >= 1, got {samples}.")
         _checks.require_positive("duration", duration, allow_zero=True)
-        return _segment([force] * samples, [0] * samples, [duration / samples] * samples)
+        return _segment(
+            [force] * samples, [0] * samples, [duration / samples] * samples
+        )
 
     @staticmethod
     def rest(duration: float, samples: int = 1) -> "Protocol":

@@ -296,9 +296,7 @@ def _check_history(cable, time, x, mask, xname):
         if xname == "force":
             _checks.require_positive("force", x, allow_zero=True)
             if _checks.is_concrete(cable.breaking_load):
-                _checks.require_below(
-                    "force", x, cable.breaking_load, "breaking load"
-                )
+                _checks.require_below("force", x, cable.breaking_load, "breaking load")
     dtype = jnp.result_type(float, cable.length)
     time = jnp.asarray(time, dtype)
     x = jnp.asarray(x, dtype)
@@ -354,7 +352,9 @@ def _rate_step(model, cable, carry: CableState, x, solver):
         (dt >= 0) & jnp.isfinite(dt), step_result, RESULTS.nonphysical_time
     )
     model_state, parts = model.advance(carry.model_state, cable, dt, force, direction)
-    new, _ = _commit(carry, model_state, parts, carry.time + dt, force, step_result, mask)
+    new, _ = _commit(
+        carry, model_state, parts, carry.time + dt, force, step_result, mask
+    )
     parts = _select(mask, parts, _parts_of(carry, parts))
     return new, parts
 
@@ -492,9 +492,7 @@ def _elongation_kernel(model, cable, time, elongation, mask, solver, throw):
         new, parts = _elongation_step(model, cable, carry, x, solver)
         return new, (new, x[2], parts)
 
-    final, (states, masks, parts) = jax.lax.scan(
-        body, carry, (time, elongation, mask)
-    )
+    final, (states, masks, parts) = jax.lax.scan(body, carry, (time, elongation, mask))
     return _trajectory(cable, (states, masks), parts, final.result, throw)
 
 
@@ -529,5 +527,3 @@ def simulate_elongation_history(
     """
     time, elongation, mask = _check_history(cable, time, elongation, mask, "elongation")
     return _elongation_kernel(model, cable, time, elongation, mask, solver, throw)
-
-
