@@ -1,0 +1,166 @@
+"""Failure is never silent: Python-boundary ValueErrors and traced RESULTS."""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxcable as jc
+
+
+CABLE = jc.Cable(length=0.3, speed=3e-3 / 60)
+MODEL = jc.IntegratedModel()
+T = np.linspace(0.0, 100.0, 11)
+F = np.linspace(0.0, 100.0, 11)
+
+
+@pytest.mark.parametrize(
+    "time, force, match",
+    [
+        (T, np.where(np.arange(11) == 3, np.nan, F), r"`force`.*element 3 is nan"),
+        (np.where(np.arange(11) == 5, np.inf, T), F, r"`time`.*finite"),
+        (
+            np.array([0.0, 1.0, 1.0, 2.0]),
+            np.ones(4),
+            r"`time` must be strictly increasing; sample 2",
+        ),
+        (np.array([0.0, 2.0, 1.0]), np.ones(3), r"`time` must be strictly increasing"),
+        (T, F[:-1], r"Mismatched shapes: `time` \(11,\), `force` \(10,\)"),
+        (np.array([]), np.array([]), r"`time` is empty"),
+        (
+            T,
+            np.full(11, 2500.0),
+            r"`force` exceeds the cable's breaking load \(2000 N\)",
+        ),
+        (T, -F, r"`force` must be non-negative"),
+        (np.stack([T, T]), np.stack([F, F]), r"`time` must be 1-dimensional"),
+    ],
+)
+def test_force_history_bad_inputs(time, force, match):
+    with pytest.raises(ValueError, match=match):
+        jc.simulate_force_history(MODEL, CABLE, time, force)
+
+
+def test_elongation_history_bad_inputs():
+    with pytest.raises(ValueError, match=r"`elongation`.*element 2 is nan"):
+        jc.simulate_elongation_history(
+            MODEL, CABLE, T, np.where(np.arange(11) == 2, np.nan, F)
+        )
+    with pytest.raises(ValueError, match="`time` must be strictly increasing"):
+        jc.simulate_elongation_history(MODEL, CABLE, T[::-1], F * 1e-5)
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        (dict(length=0.0), "`length` must be positive"),
+        (dict(length=-0.3), "`length` must be positive"),
+        (dict(length=0.3, diameter=0.0), "`diameter` must be positive"),
+        (dict(length=0.3, speed=-1.0), "`speed` must be positive"),
+        (dict(length=np.nan), "`length` must be finite"),
+        (dict(length=0.3, breaking_load=0.0), "`breaking_load` must be positive"),
+    ],
+)
+def test_cable_bad_inputs(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        jc.Cable(**kwargs)
+
+
+def test_batched_cable_needs_vmap():
+    cables = jc.Cable(length=jnp.array([0.1, 0.3]))
+    with pytest.raises(ValueError, match="`cable.length` has shape \\(2,\\)"):
+        jc.simulate_force_history(MODEL, cables, T, F)
+
+
+def test_protocol_bad_inputs():
+    with pytest.raises(ValueError, match="samples"):
+        jc.Protocol.ramp(0.0, 100.0, 0)
+    with pytest.raises(ValueError, match="force_to != force_from"):
+        jc.Protocol.ramp(10.0, 10.0, 5)
+    with pytest.raises(ValueError, match="`duration` must be non-negative"):
+        jc.Protocol.hold(10.0, -1.0)
+    with pytest.raises(ValueError, match="`Protocol.force` must be non-negative"):
+        jc.Protocol.ramp(0.0, -10.0, 5)
+    with pytest.raises(ValueError, match="breaking load"):
+        jc.simulate_rate_test(MODEL, CABLE, jc.Protocol.cycles(2500.0, 1, 10))
+    with pytest.raises(ValueError, match="`protocol` must be a jaxcable.Protocol"):
+        jc.simulate_rate_test(MODEL, CABLE, F)
+
+
+def _bad_tr2_model():
+    # t_r2 = lambda1 / rate^2 - lambda2 <= 0 for this cable (Park Eq. 8).
+    rate = float(CABLE.strain_rate)
+    return eqx.tree_at(lambda m: m.lambda2, MODEL, float(MODEL.lambda1) / rate**2 * 2)
+
+
+def test_parameter_out_of_domain_raises_and_reports():
+    model = _bad_tr2_model()
+    with pytest.raises(Exception, match="t_r2"):
+        jc.simulate_force_history(model, CABLE, T, F)
+    traj = jc.simulate_force_history(model, CABLE, T, F, throw=False)
+    assert traj.result == jc.RESULTS.parameter_out_of_domain
+
+
+def test_per_sample_status_in_a_batch():
+    # throw=False in a Monte-Carlo batch: the good parameter sets are kept and each
+    # set carries its own status.
+    good, bad = MODEL, _bad_tr2_model()
+    stacked = jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), good, bad, good)
+    trajs = jax.vmap(lambda m: jc.simulate_force_history(m, CABLE, T, F, throw=False))(
+        stacked
+    )
+    ok = trajs.result == jc.RESULTS.successful
+    np.testing.assert_array_equal(ok, [True, False, True])
+    assert np.all(np.isfinite(trajs.strain[0]))
+    # And with throw=True, the batch raises.
+    with pytest.raises(Exception, match="outside its domain"):
+        jax.vmap(lambda m: jc.simulate_force_history(m, CABLE, T, F))(stacked)
+
+
+def test_unreachable_force_is_a_newton_failure():
+    # A dashpot so soft that creep outruns the crosshead: the force limit is never
+    # reached, so the loading time has no root (Park Eq. 5 = Eq. 6).
+    model = eqx.tree_at(lambda m: m.eta0, MODEL, MODEL.eta0 * 1e-3)
+    protocol = jc.Protocol.cycles(100.0, 1, 50)
+    traj = jc.simulate_rate_test(model, CABLE, protocol, throw=False)
+    assert traj.result in (jc.RESULTS.newton_failed, jc.RESULTS.nonphysical_time)
+    with pytest.raises(Exception, match="Newton|loading time"):
+        jc.simulate_rate_test(model, CABLE, protocol)
+
+
+def test_traced_nonfinite_force_is_flagged_not_silent():
+    # Inside a user's jit the Python checks cannot see values; the kernel flags them.
+    f = jnp.asarray(F).at[4].set(jnp.nan)
+    run = jax.jit(
+        lambda f: jc.simulate_force_history(MODEL, CABLE, T, f, throw=False).result
+    )
+    assert run(f) != jc.RESULTS.successful
+    with pytest.raises(Exception, match="force|strain"):
+        jax.jit(lambda f: jc.simulate_force_history(MODEL, CABLE, T, f).strain)(f)
+
+
+def test_traced_decreasing_time_is_flagged():
+    t = jnp.asarray(T).at[5].set(-1.0)
+    res = jax.jit(
+        lambda t: jc.simulate_force_history(MODEL, CABLE, t, F, throw=False).result
+    )(t)
+    assert res == jc.RESULTS.nonphysical_time
+
+
+def test_bad_solver_type():
+    with pytest.raises(ValueError, match="solver"):
+        jc.simulate_rate_test(
+            MODEL, CABLE, jc.Protocol.cycles(100.0, 1, 10), solver="newton"
+        )
+
+
+def test_optimistix_solver_agrees_with_builtin_newton():
+    import optimistix as optx
+
+    protocol = jc.Protocol.cycles(100.0, 1, 20)
+    a = jc.simulate_rate_test(MODEL, CABLE, protocol)
+    b = jc.simulate_rate_test(
+        MODEL, CABLE, protocol, solver=optx.Newton(rtol=1e-12, atol=1e-12)
+    )
+    np.testing.assert_allclose(a.time, b.time, rtol=1e-9)
