@@ -1,5 +1,7 @@
 import equinox as eqx
+import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, Float, Int
 
 from ._abstract import AbstractCableModel, StrainParts, positive_result
@@ -107,10 +109,6 @@ class IntegratedModel(AbstractCableModel[IntegratedState]):
     lambda2: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=2.1e4)
 
     def __check_init__(self):
-        import jax
-
-        import numpy as np
-
         for name in (
             "E1c",
             "E1r",
@@ -211,7 +209,9 @@ class IntegratedModel(AbstractCableModel[IntegratedState]):
         force_reversal = jnp.where(reversed_, state.force, state.force_reversal)
         inst_reversal = jnp.where(reversed_, prev.instantaneous, state.inst_reversal)
         recovered_short = jnp.where(
-            to_loading, state.recovered_short + prev.recovery_short, state.recovered_short
+            to_loading,
+            state.recovered_short + prev.recovery_short,
+            state.recovered_short,
         )
         recovered_long = jnp.where(
             to_loading, state.recovered_long + prev.recovery_long, state.recovered_long

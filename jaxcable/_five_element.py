@@ -1,0 +1,244 @@
+import math
+
+import equinox as eqx
+import jax.numpy as jnp
+from jaxtyping import Array, Float, Int
+
+from . import _checks
+from ._abstract import AbstractCableModel, StrainParts, positive_result
+from ._cable import Cable
+from ._results import RESULTS
+
+
+# Below this h / tau the closed form loses digits to cancellation (relative error
+# ~2 eps tau / h); its Taylor series, sum_{k>=1} (-1)^(k+1) x^k / (k+1)!, truncated
+# after x^9, is exact to rounding there (next term ~5e-17 of the value).
+_SERIES_BELOW = 0.1
+_RAMP_SERIES = tuple((-1.0) ** (k + 1) / math.factorial(k + 1) for k in range(1, 10))
+
+
+def _ramp_factor(x):
+    """1 - (1 - exp(-x)) / x = (x + expm1(-x)) / x, the share of a linear stress ramp
+    that a Kelvin-Voigt element has not yet followed after x = h / tau.
+
+    Continued by its Taylor series near x = 0 so that the value (0 at x = 0) and its
+    gradient (1/2) stay finite there.
+    """
+    small = jnp.abs(x) < _SERIES_BELOW
+    x_safe = jnp.where(small, 1.0, x)
+    direct = (x_safe + jnp.expm1(-x_safe)) / x_safe
+    series = jnp.zeros_like(x)
+    for c in reversed(_RAMP_SERIES):  # Horner, highest power first
+        series = (series + c) * x
+    return jnp.where(small, series, direct)
+
+
+def kelvin_voigt_step(q0, s0, s1, h, E, eta):
+    """Exact strain of a Kelvin-Voigt element (spring E parallel to dashpot eta) after a
+    step of length h over which the stress goes linearly from s0 to s1.
+
+    Solves eta q' + E q = s(t) in closed form: with tau = eta / E and a = exp(-h / tau),
+    q1 = a q0 + (1/E) [s1 - a s0 - (s1 - s0) (tau / h) (1 - a)], written as
+    a q0 + (1/E) [s0 (1 - a) + (s1 - s0) (1 - (tau / h)(1 - a))] so that the h -> 0
+    limit (q1 = q0) has finite values and gradients. Units: stress and E in Pa, eta in
+    Pa s, h in s; q is a strain.
+    """
+    x = h * E / eta
+    decay = jnp.exp(-x)
+    return decay * q0 + (-s0 * jnp.expm1(-x) + (s1 - s0) * _ramp_factor(x)) / E
+
+
+def check_parameters(model_name: str, model, names, *, positive=True) -> None:
+    """Raise `ValueError` naming the first concrete field that is not finite (and, with
+    `positive`, not > 0). Traced fields are skipped: `check` flags them instead."""
+    for name in names:
+        value = getattr(model, name)
+        if not _checks.is_concrete(value):
+            continue
+        if positive:
+            _checks.require_positive(f"{model_name}.{name}", value)
+        else:
+            _checks.require_finite(f"{model_name}.{name}", value)
+
+
+class FiveElementState(eqx.Module):
+    """Scan carry of [`jaxcable.FiveElementModel`][] for one cable (all SI).
+
+    The two families of Kelvin-Voigt strains are driven by the stress increments made
+    on each branch (Boltzmann superposition with branch-dependent kernels).
+
+    **Fields:**
+
+    - `stress`: total stress sigma = F / A at the previous sample, Pa.
+    - `branch`: +1 loading, -1 unloading (the branch of the previous step).
+    - `sigma_L`: sum of the stress increments made while loading, Pa (>= 0 for a
+        monotone start).
+    - `sigma_UL`: sum of the stress increments made while unloading, Pa (<= 0).
+    - `q_L2`, `q_L3`: strains of the loading Kelvin-Voigt elements (E_L2, eta_L2) and
+        (E_L3, eta_L3) driven by `sigma_L`.
+    - `q_UL2`, `q_UL3`: strains of the unloading elements (E_UL2, eta_UL2) and
+        (E_UL3, eta_UL3) driven by `sigma_UL` (<= 0: recovery).
+    """
+
+    stress: Float[Array, ""]
+    branch: Int[Array, ""]
+    sigma_L: Float[Array, ""]
+    sigma_UL: Float[Array, ""]
+    q_L2: Float[Array, ""]
+    q_L3: Float[Array, ""]
+    q_UL2: Float[Array, ""]
+    q_UL3: Float[Array, ""]
+
+
+_FIVE_ELEMENT_FIELDS = (
+    "E_L1",
+    "E_L2",
+    "E_L3",
+    "eta_L2",
+    "eta_L3",
+    "E_UL1",
+    "E_UL2",
+    "E_UL3",
+    "eta_UL2",
+    "eta_UL3",
+)
+
+
+class FiveElementModel(AbstractCableModel[FiveElementState]):
+    r"""Piao et al.'s five-element creep model: a linear spring in series with two
+    Kelvin-Voigt elements, with separate loading (L) and unloading (UL) parameters.
+
+    **Equations (Piao Eq. 1-3).** Under a stress step sigma applied at t = 0
+    (sigma = F / A, Pa) the strain is (Eq. 1)
+
+        eps(t) = sigma / E_L1 + sigma / E_L2 (1 - exp(-E_L2 t / eta_L2))
+                              + sigma / E_L3 (1 - exp(-E_L3 t / eta_L3)),
+
+    i.e. an instantaneous spring, a transient creep element (retardation time
+    tau_2 = eta_2 / E_2) and a long-term creep element (tau_3 = eta_3 / E_3). Eq. 2-3
+    describe unloading as adding a stress -sigma_0 (a ramp from t_r to t_2, then held),
+    with the unloading parameters: this is the Boltzmann superposition of the load step
+    and the unloading ramp. Eq. 2 prints eta_UL2 in the exponent of the E_UL3 term;
+    it is read as eta_UL3 (MODEL_NOTES point 10).
+
+    **Superposition reading, any force history.** The stress increments made while
+    loading and while unloading are accumulated separately, sigma_L (loading steps) and
+    sigma_UL (unloading steps, negative), and each drives its own family of elements
+    with its own kernel:
+
+        eps = sigma_L / E_L1 + q_L2 + q_L3 + sigma_UL / E_UL1 + q_UL2 + q_UL3,
+        eta_k q_k' + E_k q_k = sigma_family(t)   (k = L2, L3 driven by sigma_L;
+                                                   k = UL2, UL3 driven by sigma_UL).
+
+    The force is linear between samples, so each element is advanced by its exact
+    exponential update (no time-step error). The branch of a
+    step is `direction` (+1 loading, -1 unloading, 0 keeps the previous branch) and the
+    step's stress increment goes to that branch's family. With equal L and UL parameters
+    this is the linear five-element (generalised Kelvin) solid: Eq. 1 and Eq. 3 hold
+    exactly as printed (Eq. 3 being the instantaneous-unloading limit) and Eq. 2 in its
+    superposition reading. With different sets the loading family keeps relaxing
+    towards sigma_L while the unloading family recovers with its own kernel, so a
+    load-unload cycle leaves sigma_0 (1/E_L1 - 1/E_UL1) at once, plus the difference
+    of the two families' retarded strains.
+
+    **Strain parts.** `instantaneous` = sigma_L / E_L1 + sigma_UL / E_UL1 (both springs),
+    `creep` = q_L2 + q_L3, `recovery_short` = -q_UL2, `recovery_long` = -q_UL3.
+
+    **Default parameters.** Loading: Piao Table 1, E_L2 = 9.5e9 Pa, E_L3 = 5.0e10 Pa,
+    eta_L2 = 1.0e10 Pa s (tau_2 ~ 1.05 s), eta_L3 = 1.0e13 Pa s (tau_3 = 200 s). E_L1 is
+    a function of payload and cable length in the paper (Table 3); the default
+    2.2e14 Pa is that surface at the robot's maximum payload 65 kg on a 7.4 m cable, read
+    as described in [`jaxcable.PIAO_TABLE3`][] (Pa, as Table 1's unit says). It makes
+    the spring practically rigid (strain < 1e-6 at the paper's loads): the elongation
+    Piao fitted is carried by the two Kelvin-Voigt elements. The unloading table
+    (Table 2) is lost, so **the unloading parameters default to the loading ones**
+    (E_UL1 = E_L1, E_UL2 = E_L2, ...): the default model is the linear five-element
+    solid, which recovers fully after unloading.
+    Fit the UL set to recovery data to obtain the paper's loading/unloading asymmetry.
+
+    **Fields (SI):**
+
+    - `E_L1`, `E_L2`, `E_L3`: loading spring, transient and long-term moduli, Pa.
+    - `eta_L2`, `eta_L3`: loading transient and long-term viscosities, Pa s.
+    - `E_UL1`, `E_UL2`, `E_UL3`: unloading moduli, Pa.
+    - `eta_UL2`, `eta_UL3`: unloading viscosities, Pa s.
+
+    All fields are arrays; give them a leading batch axis and `jax.vmap` over the model
+    to simulate parameter sets.
+    """
+
+    E_L1: Float[Array, "*batch"] = eqx.field(converter=jnp.asarray, default=2.2e14)
+    E_L2: Float[Array, "*batch"] = eqx.field(converter=jnp.asarray, default=9.5e9)
+    E_L3: Float[Array, "*batch"] = eqx.field(converter=jnp.asarray, default=5.0e10)
+    eta_L2: Float[Array, "*batch"] = eqx.field(converter=jnp.asarray, default=1.0e10)
+    eta_L3: Float[Array, "*batch"] = eqx.field(converter=jnp.asarray, default=1.0e13)
+    E_UL1: Float[Array, "*batch"] = eqx.field(converter=jnp.asarray, default=2.2e14)
+    E_UL2: Float[Array, "*batch"] = eqx.field(converter=jnp.asarray, default=9.5e9)
+    E_UL3: Float[Array, "*batch"] = eqx.field(converter=jnp.asarray, default=5.0e10)
+    eta_UL2: Float[Array, "*batch"] = eqx.field(converter=jnp.asarray, default=1.0e10)
+    eta_UL3: Float[Array, "*batch"] = eqx.field(converter=jnp.asarray, default=1.0e13)
+
+    def __check_init__(self):
+        check_parameters("FiveElementModel", self, _FIVE_ELEMENT_FIELDS)
+
+    def check(self, cable: Cable) -> RESULTS:
+        return positive_result(*(getattr(self, n) for n in _FIVE_ELEMENT_FIELDS))
+
+    def init(self, cable: Cable) -> FiveElementState:
+        zero = jnp.zeros((), jnp.result_type(float, self.E_L1, cable.length))
+        return FiveElementState(
+            stress=zero,
+            branch=jnp.array(1, jnp.int32),
+            sigma_L=zero,
+            sigma_UL=zero,
+            q_L2=zero,
+            q_L3=zero,
+            q_UL2=zero,
+            q_UL3=zero,
+        )
+
+    def advance(
+        self,
+        state: FiveElementState,
+        cable: Cable,
+        dt: Float[Array, ""],
+        force: Float[Array, ""],
+        direction: Int[Array, ""],
+    ) -> tuple[FiveElementState, StrainParts]:
+        stress = force / cable.area
+        branch = jnp.where(direction == 0, state.branch, direction).astype(jnp.int32)
+        loading = branch > 0
+        # Piao Section 3.1: the increment of this step is superposed with the kernel
+        # of its branch; the other family keeps its stress (still relaxing towards it).
+        increment = stress - state.stress
+        sigma_L = state.sigma_L + jnp.where(loading, increment, 0.0)
+        sigma_UL = state.sigma_UL + jnp.where(loading, 0.0, increment)
+        q_L2 = kelvin_voigt_step(
+            state.q_L2, state.sigma_L, sigma_L, dt, self.E_L2, self.eta_L2
+        )
+        q_L3 = kelvin_voigt_step(
+            state.q_L3, state.sigma_L, sigma_L, dt, self.E_L3, self.eta_L3
+        )
+        q_UL2 = kelvin_voigt_step(
+            state.q_UL2, state.sigma_UL, sigma_UL, dt, self.E_UL2, self.eta_UL2
+        )
+        q_UL3 = kelvin_voigt_step(
+            state.q_UL3, state.sigma_UL, sigma_UL, dt, self.E_UL3, self.eta_UL3
+        )
+        parts = StrainParts(
+            instantaneous=sigma_L / self.E_L1 + sigma_UL / self.E_UL1,
+            creep=q_L2 + q_L3,
+            recovery_short=-q_UL2,
+            recovery_long=-q_UL3,
+        )
+        new_state = FiveElementState(
+            stress=stress,
+            branch=branch,
+            sigma_L=sigma_L,
+            sigma_UL=sigma_UL,
+            q_L2=q_L2,
+            q_L3=q_L3,
+            q_UL2=q_UL2,
+            q_UL3=q_UL3,
+        )
+        return new_state, parts
