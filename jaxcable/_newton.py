@@ -46,8 +46,18 @@ def root_scalar(
     guess: Float[Array, ""],
     args: Any,
     lower: Float[Array, ""],
+    slope_sign: Float[Array, ""] | None = None,
+    growth: Float[Array, ""] | None = None,
 ) -> tuple[Float[Array, ""], Bool[Array, ""]]:
-    """Solve fn(y, args) = 0 for a scalar y >= lower; returns (y, converged)."""
+    """Solve fn(y, args) = 0 for a scalar y >= lower; returns (y, converged).
+
+    `slope_sign` (+1 or -1), where known, is the sign of fn's slope at the wanted
+    root. Where the slope at an iterate has the other sign (or is zero), the root
+    lies beyond a turning point of fn, and a Newton step would run away from it: the
+    iterate is then grown geometrically instead, y <- 2 y + `growth`. This is what
+    makes the loading-time solve robust when a fast recovery briefly outruns the
+    crosshead (a residual that first falls, then rises through zero).
+    """
     if isinstance(solver, optx.AbstractRootFinder):
         sol = optx.root_find(
             fn,
@@ -67,12 +77,16 @@ def root_scalar(
 
     def newton_step(f, y):
         r, slope = jax.jvp(f, (y,), (jnp.ones_like(y),))
-        # A flat or non-finite slope (e.g. the hardening law at 0 N) gives no step;
-        # the sample is then reported unconverged instead of carrying a NaN.
         step = r / jnp.where(slope == 0, 1.0, slope)
         ok = (slope != 0) & jnp.isfinite(step)
-        y_new = jnp.maximum(jnp.where(ok, y - step, y), lower)
-        return y_new, r
+        if slope_sign is None:
+            # A flat or non-finite slope gives no step; the sample is then reported
+            # unconverged instead of carrying a NaN.
+            y_new = jnp.where(ok, y - step, y)
+        else:
+            ok = ok & (slope * slope_sign > 0)
+            y_new = jnp.where(ok, y - step, 2 * y + growth)
+        return jnp.maximum(y_new, lower), r
 
     def converged(y, y_prev, r):
         del y_prev

@@ -344,8 +344,18 @@ def _rate_step(model, cable, carry: CableState, x, solver):
     _, parts0 = model.advance(carry.model_state, cable, zero, force, direction)
     jump = jnp.abs(parts0.total - carry.strain) / cable.strain_rate
     guess = jnp.where(direction != 0, jump, duration)
+    # Along a loading ramp the crosshead overtakes the model strain (slope < 0 at the
+    # root); along an unloading ramp the other way round; a hold is linear in dt.
+    slope_sign = jnp.where(direction != 0, -direction, 1).astype(guess.dtype)
+    growth = 1e-6 / cable.strain_rate
     dt, converged = root_scalar(
-        _time_residual, solver, guess, problem, jnp.zeros_like(guess)
+        _time_residual,
+        solver,
+        guess,
+        problem,
+        jnp.zeros_like(guess),
+        slope_sign=slope_sign,
+        growth=growth,
     )
     step_result = RESULTS.where(converged, RESULTS.successful, RESULTS.newton_failed)
     step_result = RESULTS.where(
@@ -468,7 +478,16 @@ def _elongation_step(model, cable, carry: CableState, x, solver):
     guess = jnp.clip(
         f_prev - r_prev / compliance, 1e-6 * cable.breaking_load, cable.breaking_load
     )
-    solved, converged = root_scalar(_force_residual, solver, guess, problem, zero)
+    # Strain rises with force; a flat slope (0 N under hardening) grows the force.
+    solved, converged = root_scalar(
+        _force_residual,
+        solver,
+        guess,
+        problem,
+        zero,
+        slope_sign=jnp.ones_like(guess),
+        growth=1e-6 * cable.breaking_load,
+    )
     force = jnp.where(slack, zero, solved)
     converged = slack | converged
     step_result = RESULTS.where(converged, RESULTS.successful, RESULTS.newton_failed)
