@@ -210,6 +210,39 @@ def _parts_of(carry: CableState, like: StrainParts) -> StrainParts:
     return StrainParts(carry.strain, z, z, z)
 
 
+def _scan(body, carry, xs, mask_index: int, checkpoint: int | None):
+    """`lax.scan` over samples; with `checkpoint`, a scan over blocks of that many
+    samples whose body is rematerialised (`jax.checkpoint`) in the backward pass.
+
+    Reverse-mode memory then grows as (samples / checkpoint) carries plus one block of
+    intermediates, instead of every intermediate of every sample: choose
+    `checkpoint` near sqrt(samples) for 10^5-10^6-sample histories. The history is
+    padded to whole blocks with masked samples, which leave the carry unchanged.
+    """
+    if checkpoint is None:
+        return jax.lax.scan(body, carry, xs)
+    if not isinstance(checkpoint, int) or checkpoint < 1:
+        raise ValueError(f"`checkpoint` must be a positive int, got {checkpoint!r}.")
+    n = jnp.shape(xs[0])[0]
+    blocks = -(-n // checkpoint)
+    pad = blocks * checkpoint - n
+
+    def padded(i, x):
+        fill = jnp.zeros_like(x[-1:]) if i == mask_index else x[-1:]
+        x = jnp.concatenate([x, jnp.repeat(fill, pad, axis=0)]) if pad else x
+        return x.reshape(blocks, checkpoint, *x.shape[1:])
+
+    xs = tuple(padded(i, x) for i, x in enumerate(xs))
+
+    @jax.checkpoint
+    def block(carry, xs_block):
+        return jax.lax.scan(body, carry, xs_block)
+
+    final, ys = jax.lax.scan(block, carry, xs)
+    ys = jtu.tree_map(lambda y: y.reshape(blocks * checkpoint, *y.shape[2:])[:n], ys)
+    return final, ys
+
+
 def _trajectory(cable, outs, parts, result, throw) -> Trajectory:
     states, mask = outs
     traj = Trajectory(
@@ -231,7 +264,7 @@ def _trajectory(cable, outs, parts, result, throw) -> Trajectory:
 
 
 @eqx.filter_jit
-def _force_kernel(model, cable, time, force, mask, tolerance, throw):
+def _force_kernel(model, cable, time, force, mask, tolerance, throw, checkpoint):
     TRACE_COUNTS["force"] += 1
     carry = init_state(model, cable, time[0])
 
@@ -240,7 +273,9 @@ def _force_kernel(model, cable, time, force, mask, tolerance, throw):
         new, parts = _force_step(model, cable, carry, t, f, m, tolerance)
         return new, (new, m, parts)
 
-    final, (states, masks, parts) = jax.lax.scan(body, carry, (time, force, mask))
+    final, (states, masks, parts) = _scan(
+        body, carry, (time, force, mask), 2, checkpoint
+    )
     return _trajectory(cable, (states, masks), parts, final.result, throw)
 
 
@@ -253,6 +288,7 @@ def simulate_force_history(
     mask: Bool[ArrayLike, " samples"] | None = None,
     reversal_tolerance: float = 0.0,
     throw: bool = True,
+    checkpoint: int | None = None,
 ) -> Trajectory:
     """Simulate a time-stamped force history, as a robot logs it.
 
@@ -271,13 +307,17 @@ def simulate_force_history(
     - `reversal_tolerance`: a force change smaller than this (N) keeps the branch.
     - `throw`: raise on failure (default). With `throw=False` the failure is returned
         in `Trajectory.result` (per cable under vmap).
+    - `checkpoint`: optional block length (samples) of a checkpointed scan, for the
+        gradients of long histories in bounded memory (about sqrt(samples)).
 
     **Returns:**
 
     A [`jaxcable.Trajectory`][].
     """
     time, force, mask = _check_history(cable, time, force, mask, "force")
-    return _force_kernel(model, cable, time, force, mask, reversal_tolerance, throw)
+    return _force_kernel(
+        model, cable, time, force, mask, reversal_tolerance, throw, checkpoint
+    )
 
 
 def _check_history(cable, time, x, mask, xname):
@@ -370,7 +410,7 @@ def _rate_step(model, cable, carry: CableState, x, solver):
 
 
 @eqx.filter_jit
-def _rate_kernel(model, cable, protocol: Protocol, solver, throw):
+def _rate_kernel(model, cable, protocol: Protocol, solver, throw, checkpoint):
     TRACE_COUNTS["rate"] += 1
     carry = init_state(model, cable)
     dtype = carry.strain.dtype
@@ -387,7 +427,7 @@ def _rate_kernel(model, cable, protocol: Protocol, solver, throw):
         new, parts = _rate_step(model, cable, carry, x, solver)
         return new, (new, x[3], parts)
 
-    final, (states, masks, parts) = jax.lax.scan(body, carry, xs)
+    final, (states, masks, parts) = _scan(body, carry, xs, 3, checkpoint)
     return _trajectory(cable, (states, masks), parts, final.result, throw)
 
 
@@ -398,6 +438,7 @@ def simulate_rate_test(
     *,
     solver: Newton | optx.AbstractRootFinder | None = None,
     throw: bool = True,
+    checkpoint: int | None = None,
 ) -> Trajectory:
     """Simulate a rate-driven test, as a tensile tester runs it (Park Section 4).
 
@@ -416,6 +457,8 @@ def simulate_rate_test(
         `jaxcable.Newton` with tolerances in seconds set by the dtype).
     - `throw`: raise on failure (default); `throw=False` returns the status in
         `Trajectory.result`.
+    - `checkpoint`: optional block length (samples) of a checkpointed scan, for the
+        gradients of long histories in bounded memory (about sqrt(samples)).
 
     **Returns:**
 
@@ -436,7 +479,7 @@ def simulate_rate_test(
             _checks.require_below(
                 "protocol.force", protocol.force, cable.breaking_load, "breaking load"
             )
-    return _rate_kernel(model, cable, protocol, solver, throw)
+    return _rate_kernel(model, cable, protocol, solver, throw, checkpoint)
 
 
 # ----------------------------------------------------------------------------------
@@ -501,7 +544,7 @@ def _elongation_step(model, cable, carry: CableState, x, solver):
 
 
 @eqx.filter_jit
-def _elongation_kernel(model, cable, time, elongation, mask, solver, throw):
+def _elongation_kernel(model, cable, time, elongation, mask, solver, throw, checkpoint):
     TRACE_COUNTS["elongation"] += 1
     carry = init_state(model, cable, time[0])
     if solver is None:
@@ -511,7 +554,9 @@ def _elongation_kernel(model, cable, time, elongation, mask, solver, throw):
         new, parts = _elongation_step(model, cable, carry, x, solver)
         return new, (new, x[2], parts)
 
-    final, (states, masks, parts) = jax.lax.scan(body, carry, (time, elongation, mask))
+    final, (states, masks, parts) = _scan(
+        body, carry, (time, elongation, mask), 2, checkpoint
+    )
     return _trajectory(cable, (states, masks), parts, final.result, throw)
 
 
@@ -524,6 +569,7 @@ def simulate_elongation_history(
     mask: Bool[ArrayLike, " samples"] | None = None,
     solver: Newton | optx.AbstractRootFinder | None = None,
     throw: bool = True,
+    checkpoint: int | None = None,
 ) -> Trajectory:
     """Simulate a time-stamped elongation history (displacement control, e.g. a
     relaxation test): the force of each sample is solved by Newton's method.
@@ -538,11 +584,14 @@ def simulate_elongation_history(
     - `cable`: the [`jaxcable.Cable`][].
     - `time`: sample times, s, strictly increasing.
     - `elongation`: imposed elongation, m.
-    - `mask`, `solver`, `throw`: as in [`jaxcable.simulate_rate_test`][].
+    - `mask`, `solver`, `throw`, `checkpoint`: as in
+        [`jaxcable.simulate_rate_test`][] and [`jaxcable.simulate_force_history`][].
 
     **Returns:**
 
     A [`jaxcable.Trajectory`][] whose `force` holds the solved forces, N.
     """
     time, elongation, mask = _check_history(cable, time, elongation, mask, "elongation")
-    return _elongation_kernel(model, cable, time, elongation, mask, solver, throw)
+    return _elongation_kernel(
+        model, cable, time, elongation, mask, solver, throw, checkpoint
+    )
