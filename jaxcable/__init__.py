@@ -4,6 +4,11 @@ from ._abstract import (
     AbstractCableModel as AbstractCableModel,
     StrainParts as StrainParts,
 )
+from ._analysis import (
+    loop_energies as loop_energies,
+    secant_stiffness as secant_stiffness,
+    split_cycles as split_cycles,
+)
 from ._baselines import (
     BoucWenModel as BoucWenModel,
     BoucWenState as BoucWenState,
@@ -21,7 +26,28 @@ from ._integrated import (
     IntegratedModel as IntegratedModel,
     IntegratedState as IntegratedState,
 )
-from ._io import TestData as TestData, read_csv as read_csv, write_csv as write_csv
+from ._io import (
+    SlackReport as SlackReport,
+    SlackStretch as SlackStretch,
+    Test as Test,
+    TestData as TestData,
+    mask_slack as mask_slack,
+    read_csv as read_csv,
+    read_test as read_test,
+    write_csv as write_csv,
+)
+from ._montecarlo import (
+    AbstractDistribution as AbstractDistribution,
+    AbstractParameterSampler as AbstractParameterSampler,
+    CorrelatedParameters as CorrelatedParameters,
+    ForceHistory as ForceHistory,
+    IndependentParameters as IndependentParameters,
+    LogNormal as LogNormal,
+    MonteCarloResult as MonteCarloResult,
+    Normal as Normal,
+    Uniform as Uniform,
+    monte_carlo as monte_carlo,
+)
 from ._newton import Newton as Newton
 from ._protocol import Protocol as Protocol
 from ._results import RESULTS as RESULTS
@@ -33,6 +59,12 @@ from ._simulate import (
     simulate_force_history as simulate_force_history,
     simulate_rate_test as simulate_rate_test,
     step as step,
+)
+from ._sk78 import (
+    SK78_TARGETS as SK78_TARGETS,
+    calibrate_sk78 as calibrate_sk78,
+    sk78_qualitative_checks as sk78_qualitative_checks,
+    sk78_targets_report as sk78_targets_report,
 )
 from ._surface import (
     PIAO_TABLE3 as PIAO_TABLE3,

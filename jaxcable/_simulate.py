@@ -65,7 +65,8 @@ class Trajectory(eqx.Module):
 
 class CableState(eqx.Module):
     """The driver-level state of one simulated cable: a model's state plus the last
-    sample's time (s), force (N) and strain, and the first failure so far.
+    sample's time (s), force (N) and strain, the duration of the last step (s) and
+    the first failure so far.
 
     This is the carry of every simulation's `lax.scan`, and what [`jaxcable.step`][]
     takes and returns inside a user's own scan or controller.
@@ -75,6 +76,7 @@ class CableState(eqx.Module):
     time: Float[Array, ""]
     force: Float[Array, ""]
     strain: Float[Array, ""]
+    last_step: Float[Array, ""]
     result: RESULTS
 
 
@@ -101,6 +103,7 @@ def init_state(
         time=jnp.asarray(time, dtype),
         force=zero,
         strain=zero,
+        last_step=zero,
         result=model.check(cable),
     )
 
@@ -131,6 +134,7 @@ def _commit(
         time=time,
         force=force,
         strain=strain,
+        last_step=time - carry.time,
         result=_first_failure(carry.result, step_result),
     )
     new = _select(mask, new, carry)
@@ -376,14 +380,22 @@ def _time_residual(dt, problem: _TimeProblem):
 
 
 def _rate_step(model, cable, carry: CableState, x, solver):
-    force, direction, duration, mask = x
+    force, direction, duration, mask, continues = x
     problem = _TimeProblem(model, cable, carry, force, direction, duration)
-    # Initial guess: the time the instantaneous strain step alone takes at speed v;
-    # for a hold, its duration.
-    zero = jnp.zeros_like(duration)
-    _, parts0 = model.advance(carry.model_state, cable, zero, force, direction)
-    jump = jnp.abs(parts0.total - carry.strain) / cable.strain_rate
-    guess = jnp.where(direction != 0, jump, duration)
+
+    # Initial guess. Inside a ramp, the previous step's duration (samples are close
+    # and creep is smooth, so two Newton steps suffice). At the start of a ramp, the
+    # time the instantaneous strain step alone takes at speed v. On a hold, its
+    # duration. `continues` comes from the protocol, so when one protocol is shared
+    # by a vmapped batch the cond stays a branch and the first-sample guess costs
+    # nothing on the other samples.
+    def first_guess():
+        zero = jnp.zeros_like(duration)
+        _, parts0 = model.advance(carry.model_state, cable, zero, force, direction)
+        jump = jnp.abs(parts0.total - carry.strain) / cable.strain_rate
+        return jnp.where(direction != 0, jump, duration)
+
+    guess = jax.lax.cond(continues, lambda: carry.last_step, first_guess)
     # Along a loading ramp the crosshead overtakes the model strain (slope < 0 at the
     # root); along an unloading ramp the other way round; a hold is linear in dt.
     slope_sign = jnp.where(direction != 0, -direction, 1).astype(guess.dtype)
@@ -416,11 +428,14 @@ def _rate_kernel(model, cable, protocol: Protocol, solver, throw, checkpoint):
     dtype = carry.strain.dtype
     if solver is None:
         solver = _default_solver(dtype)
+    direction = jnp.asarray(protocol.direction, jnp.int32)
+    previous = jnp.concatenate([jnp.zeros_like(direction[:1]), direction[:-1]])
     xs = (
         jnp.asarray(protocol.force, dtype),
-        jnp.asarray(protocol.direction, jnp.int32),
+        direction,
         jnp.asarray(protocol.duration, dtype),
         jnp.asarray(protocol.mask, bool),
+        (direction != 0) & (direction == previous),
     )
 
     def body(carry, x):

@@ -157,12 +157,13 @@ BAD_INPUTS = {
 }
 
 
+@pytest.mark.parametrize("reader", [jc.read_csv, jc.read_test])
 @pytest.mark.parametrize("case", list(BAD_INPUTS))
-def test_bad_input_names_file_line_column(tmp_path, case):
+def test_bad_input_names_file_line_column(tmp_path, case, reader):
     text, line, column = BAD_INPUTS[case]
     path = _write(tmp_path, text, name=f"{case}.csv")
     with pytest.raises(ValueError) as info:
-        jc.read_csv(path)
+        reader(path)
     message = str(info.value)
     assert str(path) in message
     assert re.search(rf"\bline {line}\b", message), message
@@ -174,3 +175,60 @@ def test_missing_length_can_be_given(tmp_path):
     text, _, _ = BAD_INPUTS["missing_length"]
     data = jc.read_csv(_write(tmp_path, text), length_mm=300)
     assert data.metadata["length_mm"] == 300.0
+
+
+def test_read_test_reads_canonical_files_like_read_csv(tmp_path):
+    path = _write(tmp_path, HISTORY)
+    expected = jc.read_csv(path)
+    data = jc.read_test(path)
+    assert data.metadata == expected.metadata
+    for name in ("time", "force", "elongation", "temperature", "lines"):
+        np.testing.assert_array_equal(getattr(data, name), getattr(expected, name))
+    assert list(data.extra) == ["gauge_V"]
+    np.testing.assert_array_equal(data.extra["gauge_V"], expected.extra["gauge_V"])
+    # Nothing to mask in a taut test; read_csv does not run the detection at all.
+    assert data.mask.all() and data.force_raw is None
+    assert data.slack_report is not None and data.slack_report.stretches == ()
+    assert expected.slack_report is None and expected.mask.all()
+
+
+def test_read_test_overrides_file_metadata(tmp_path):
+    path = _write(tmp_path, HISTORY)
+    data = jc.read_test(
+        path,
+        length_mm=100,
+        diameter_mm=2,
+        rate_mm_per_min=6,
+        temperature_C=30,
+        material="Dyneema SK99",
+        id="other",
+    )
+    assert data.metadata == {
+        "id": "other",
+        "material": "Dyneema SK99",
+        "length_mm": 100.0,
+        "diameter_mm": 2.0,
+        "rate_mm_per_min": 6.0,
+        "temperature_C": 30.0,
+        "operator": "A. N. Other: shift 2",
+    }
+    cable = data.cable()
+    np.testing.assert_allclose(float(cable.length), 0.1)
+    np.testing.assert_allclose(float(cable.speed), 6e-3 / 60)
+    with pytest.raises(ValueError, match=r"argument length_mm: must be positive"):
+        jc.read_test(path, length_mm=-1)
+
+
+def test_test_alias_and_mask_fields():
+    assert jc.Test is jc.TestData
+    assert jc.Test.__test__ is False  # pytest must not collect it
+    data = jc.Test(time=[0.0, 1.0, 2.0], force=[0.0, 1.0, 2.0])
+    np.testing.assert_array_equal(data.mask, [True, True, True])
+    assert data.force_raw is None and data.slack_report is None
+    masked = jc.Test(time=[0.0, 1.0], force=[0.0, 1.0], mask=[1, 0])
+    assert masked.mask.dtype == bool
+    np.testing.assert_array_equal(masked.mask, [True, False])
+    with pytest.raises(ValueError, match="mask"):
+        jc.Test(time=[0.0, 1.0], force=[0.0, 1.0], mask=[True])
+    with pytest.raises(ValueError, match="differ in length"):
+        jc.Test(time=[0.0, 1.0], force=[0.0, 1.0], force_raw=[0.0])
