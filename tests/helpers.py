@@ -25,7 +25,9 @@ def finite_difference_grad(loss, model, rel_step=1e-6):
         def shifted(delta, i=i):
             new = list(leaves)
             new[i] = leaf + delta
-            return float(loss(eqx.combine(jax.tree_util.tree_unflatten(treedef, new), static)))
+            return float(
+                loss(eqx.combine(jax.tree_util.tree_unflatten(treedef, new), static))
+            )
 
         grads.append((shifted(h) - shifted(-h)) / (2 * h))
     return jax.tree_util.tree_unflatten(treedef, [jnp.asarray(g) for g in grads])

@@ -33,7 +33,10 @@ def _reference_ramp(model, cable, forces):
     """Dense NumPy reference of Park Eq. 5 = Eq. 6 on one loading ramp (brentq)."""
     area = float(cable.area)
     rate = float(cable.strain_rate)
-    p = {k: float(getattr(model, k)) for k in ("E1c", "beta", "gamma", "E2c", "t_c", "eta0")}
+    p = {
+        k: float(getattr(model, k))
+        for k in ("E1c", "beta", "gamma", "E2c", "t_c", "eta0")
+    }
     t_prev, f_prev, eps_prev, impulse_prev = 0.0, 0.0, 0.0, 0.0
     times, strains = [], []
     for f in forces:
@@ -45,7 +48,9 @@ def _reference_ramp(model, cable, forces):
             creep = impulse / t * (1 - np.exp(-t / p["t_c"])) / (p["E2c"] * area)
             return (f / (p["E1c"] * area)) ** h + creep + impulse / (p["eta0"] * area)
 
-        t = brentq(lambda t: strain(t) - rate * t, t_prev + 1e-12, t_prev + 1e4, xtol=1e-14)
+        t = brentq(
+            lambda t: strain(t) - rate * t, t_prev + 1e-12, t_prev + 1e4, xtol=1e-14
+        )
         eps_prev = strain(t)
         impulse_prev += 0.5 * (f_prev + f) * (t - t_prev)
         t_prev, f_prev = t, f
@@ -56,7 +61,9 @@ def _reference_ramp(model, cable, forces):
 
 def test_single_ramp_matches_eq5_eq6_reference():
     model = jc.IntegratedModel()
-    protocol = jc.Protocol.concatenate(jc.Protocol.start(), jc.Protocol.ramp(0, 100, 50))
+    protocol = jc.Protocol.concatenate(
+        jc.Protocol.start(), jc.Protocol.ramp(0, 100, 50)
+    )
     traj = jc.simulate_rate_test(model, CABLE, protocol)
     times, strains = _reference_ramp(model, CABLE, np.asarray(protocol.force[1:]))
     np.testing.assert_allclose(traj.time[1:], times, rtol=1e-8)
@@ -92,11 +99,17 @@ def test_strain_continuous_at_reversal(first):
     model = jc.IntegratedModel()
     state = model.init(CABLE)
     for dt, f, d in [(60.0, 80.0, 1), (30.0, 40.0, -1), (30.0, 60.0, 1)]:
-        state, parts = model.advance(state, CABLE, jnp.asarray(dt), jnp.asarray(f), jnp.asarray(d))
+        state, parts = model.advance(
+            state, CABLE, jnp.asarray(dt), jnp.asarray(f), jnp.asarray(d)
+        )
     if first == -1:
-        state, parts = model.advance(state, CABLE, jnp.asarray(30.0), jnp.asarray(20.0), jnp.asarray(-1))
+        state, parts = model.advance(
+            state, CABLE, jnp.asarray(30.0), jnp.asarray(20.0), jnp.asarray(-1)
+        )
     before = float(parts.total)
-    _, after = model.advance(state, CABLE, jnp.asarray(0.0), state.force, jnp.asarray(-first))
+    _, after = model.advance(
+        state, CABLE, jnp.asarray(0.0), state.force, jnp.asarray(-first)
+    )
     assert abs(float(after.total) - before) < 1e-15
 
 
