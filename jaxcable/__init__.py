@@ -18,6 +18,15 @@ from ._baselines import (
     HookeState as HookeState,
 )
 from ._cable import Cable as Cable
+from ._fit import (
+    FitResult as FitResult,
+    IdentifiabilityWarning as IdentifiabilityWarning,
+    PaddedTests as PaddedTests,
+    fit as fit,
+    make_loss as make_loss,
+    pad_tests as pad_tests,
+    residuals as residuals,
+)
 from ._five_element import (
     FiveElementModel as FiveElementModel,
     FiveElementState as FiveElementState,

@@ -218,11 +218,6 @@ def test_demo_writes_plots_and_histories(demo_run):
         _one_error_line(stderr)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="The default IntegratedModel has t_r2 = lambda1 (L0/v)^2 - lambda2 < 0 at "
-    "50 mm/min on 300 mm (Park's own rate-effect test); remove when recalibrated.",
-)
 def test_demo_all_cases_succeed(demo_run):
     status, _, stdout, _ = demo_run
     assert "FAILED" not in stdout

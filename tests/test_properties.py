@@ -73,10 +73,14 @@ def _cycle_works(traj):
 
 
 @SETTINGS
-@given(log_scales, st.floats(10.0, 150.0), st.floats(1.0, 120.0))
-def test_loop_energy_per_cycle_is_non_negative(scales, force, period):
-    # Three triangular cycles 0 -> F -> 0 of `period` seconds per ramp.
+@given(log_scales, st.floats(0.0, 0.3), st.floats(10.0, 150.0), st.floats(1.0, 120.0))
+def test_loop_energy_per_cycle_is_non_negative(scales, stiffer, force, period):
+    # Three triangular cycles 0 -> F -> 0 of `period` seconds per ramp. Passivity
+    # holds where the instantaneous unloading is not softer than the loading
+    # (E1r >= E1c, as every calibrated set): a softer unloading would return more
+    # elastic energy than the loading stored.
     model = _perturbed(scales)
+    model = eqx.tree_at(lambda m: m.E1r, model, model.E1c * 10.0**stiffer)
     k = 8
     up = np.linspace(0, force, k + 1)[1:]
     one = np.concatenate([up, up[::-1][1:], [0.0]])

@@ -1,0 +1,134 @@
+"""The default IntegratedModel against Park et al.'s printed numbers (the set was
+fitted to them by `jaxcable.calibrate_sk78`, see notebooks/01_papers.ipynb)."""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxcable as jc
+from jaxcable import _sk78
+
+
+# Errors (%) of the default set, as measured when it was fitted (samples_per_ramp=200).
+MEASURED_ERRORS = {
+    "creep_ratio_300mm": 0.12,
+    "residual_300mm": -0.13,
+    "residual_100mm": 1.59,
+    "recovery_100mm_24h": 3.45,
+    "recovery_100mm_48h": 3.48,
+    "recovery_100mm_72h": 2.16,
+    "recovery_300mm_24h": -1.83,
+    "recovery_300mm_48h": 4.29,
+    "recovery_300mm_72h": -4.70,
+    "peak_300mm_50mm_min": 0.10,
+    "peak_300mm_3mm_min": -2.03,
+}
+# Targets the model cannot reach within 5 % (none reached at present).
+MISSED = set()
+
+
+@pytest.fixture(scope="module")
+def report():
+    return {row.name: row for row in jc.sk78_targets_report()}
+
+
+def test_targets_are_sourced():
+    names = [t.name for t in jc.SK78_TARGETS]
+    assert len(set(names)) == len(names) == 11
+    for target in jc.SK78_TARGETS:
+        assert "Park" in target.source
+        assert target.derived == target.name.startswith("peak_")
+
+
+def test_reached_targets_within_5_percent(report):
+    assert set(report) == set(MEASURED_ERRORS)
+    for name, row in report.items():
+        if name not in MISSED:
+            assert abs(row.error) < 5.0, (name, row.error)
+
+
+def test_errors_as_recorded(report):
+    for name, row in report.items():
+        assert row.error == pytest.approx(MEASURED_ERRORS[name], abs=0.3), name
+        assert row.error == pytest.approx(100 * (row.model / row.paper - 1))
+
+
+def test_cyclic_behaviour():
+    # Park Figs. 4-7 and Tables 4-5: stiffness rises then converges, the dissipated
+    # energy per cycle falls, the cable ends each cycle longer.
+    checks = jc.sk78_qualitative_checks()
+    for force, c in checks.items():
+        assert c["stiffness_rises"], (force, c["stiffness"])
+        assert c["stiffness_converges"], (force, c["stiffness"])
+        assert c["energy_falls"], (force, c["energy"])
+        assert c["elongation_grows"], (force, c["valley"])
+
+
+def test_rate_effect():
+    # Park Fig. 3: slower stretching, more creep, a longer cable at 100 N.
+    ramp = jc.Protocol.cycles(100.0, cycles=1, samples_per_ramp=50)
+    peaks = [
+        float(
+            jc.simulate_rate_test(
+                jc.IntegratedModel(), jc.Cable(length=0.3, speed=v), ramp
+            ).elongation[50]
+        )
+        for v in (3e-3 / 60, 50e-3 / 60)
+    ]
+    assert peaks[0] > peaks[1]
+
+
+def test_failed_simulation_reported_as_nan():
+    # t_r2 < 0 at 50 mm/min (Park Eq. 8): only that target is lost.
+    model = eqx.tree_at(lambda m: m.lambda2, jc.IntegratedModel(), 1e3)
+    rows = {r.name: r for r in jc.sk78_targets_report(model, samples_per_ramp=20)}
+    assert np.isnan(rows["peak_300mm_50mm_min"].model)
+    assert all(
+        np.isfinite(r.model)
+        for n, r in rows.items()
+        if not n.startswith("peak_300mm_50")
+    )
+
+
+def test_parametrisation_round_trip():
+    model = jc.IntegratedModel()
+    back = _sk78._model_from_log(jnp.asarray(_sk78._log_from_model(model)))
+    for name in _sk78._FIELDS:
+        assert float(getattr(back, name)) == pytest.approx(
+            float(getattr(model, name)), rel=1e-9, abs=1e-9
+        ), name
+    # Both retardation times of the fit are positive at every rate Park used.
+    for length in (0.1, 0.3):
+        for speed in (3e-3 / 60, 50e-3 / 60):
+            cable = jc.Cable(length=length, speed=speed)
+            assert float(model.retardation_time_long(cable)) > 0
+
+
+def test_target_gradient_matches_finite_differences():
+    # The fit differentiates the targets in forward mode through the kernel.
+    n = 10
+
+    def recovery_300mm_72h(log_e3r):
+        model = eqx.tree_at(lambda m: m.E3r, jc.IntegratedModel(), jnp.exp(log_e3r))
+        values, _ = _sk78._outputs(model, n, None, throw=False)
+        return values[8]
+
+    # One compiled function gives the derivative and the finite differences.
+    value_and_slope = jax.jit(lambda x: jax.jvp(recovery_300mm_72h, (x,), (1.0,)))
+    x = jnp.log(jc.IntegratedModel().E3r)
+    h = 1e-5
+    _, slope = value_and_slope(x)
+    fd = (value_and_slope(x + h)[0] - value_and_slope(x - h)[0]) / (2 * h)
+    assert float(slope) == pytest.approx(float(fd), rel=1e-5)
+    assert slope < 0  # a stiffer long-term element recovers less
+
+
+@pytest.mark.slow
+def test_calibrate_runs_and_does_not_worsen():
+    start = jc.IntegratedModel()
+    cal = jc.calibrate_sk78(start, starts=1, max_steps=3, samples_per_ramp=20)
+    assert isinstance(cal.model, jc.IntegratedModel)
+    assert len(cal.rows) == len(jc.SK78_TARGETS)
+    assert np.all(np.isfinite(cal.costs)) and cal.steps[0] <= 3
