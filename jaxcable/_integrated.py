@@ -33,11 +33,13 @@ class IntegratedState(eqx.Module):
     - `impulse`: integral of F dt since the first loading, N s (MODEL_NOTES point 6).
     - `t_total`: time under tension since the first loading, s.
     - `branch`: +1 loading, -1 unloading.
-    - `force_reversal`: force where the current branch began (F_f of Park Eq. 9), N.
+    - `force_reversal`: force where the current branch began, N (F_f of Park Eq. 9
+        on an unloading branch).
+    - `force_peak`: force where the last unloading began, N (0 before any).
     - `inst_reversal`: instantaneous strain where the current branch began.
     - `tau`: time since the current branch began, s.
-    - `set_strain`: instantaneous strain offset accumulated at reloading reversals.
-    - `recovered_short`, `recovered_long`: recovery frozen at reloading reversals.
+    - `short_reversal`, `long_reversal`: short- and long-term recovery strains where
+        the current branch began.
     - `parts`: the [`jaxcable.StrainParts`][] of the previous sample.
     """
 
@@ -47,11 +49,11 @@ class IntegratedState(eqx.Module):
     t_total: Float[Array, ""]
     branch: Int[Array, ""]
     force_reversal: Float[Array, ""]
+    force_peak: Float[Array, ""]
     inst_reversal: Float[Array, ""]
     tau: Float[Array, ""]
-    set_strain: Float[Array, ""]
-    recovered_short: Float[Array, ""]
-    recovered_long: Float[Array, ""]
+    short_reversal: Float[Array, ""]
+    long_reversal: Float[Array, ""]
     parts: StrainParts
 
 
@@ -72,10 +74,24 @@ class IntegratedModel(AbstractCableModel[IntegratedState]):
       (F_f - F) (1 - exp(-tau / t_r2)) / (E3r A) (Eq. 7) with the rate-dependent
       retardation time t_r2 = lambda1 / (v / L0)**2 - lambda2 (Eq. 8).
 
-    The strain is continuous at every load reversal: at a reloading reversal the
-    recovery reached so far is kept (frozen) and the difference between the unloading
-    and loading instantaneous laws becomes a permanent set. Hysteresis is not modelled
-    separately: it emerges from creep, hardening and recovery (Park Section 3.3).
+    Beyond the paper's paths (one loading, one unloading, a rest), any force history
+    needs a reading of what a reversal does; this one keeps the strain continuous and
+    bounded, and reduces to Eq. 1-9 exactly on Park's paths:
+
+    - the recoveries are state variables. On an unloading branch each relaxes from its
+      value q0 at the reversal towards its Eq. 4 / Eq. 7 amplitude:
+      q = amplitude (1 - exp(-tau / t_r)) + q0 exp(-tau / t_r) (q0 = 0 on the first
+      unloading: Eq. 7 as printed); on a loading branch the load takes them back,
+      q = q0 exp(-tau / t_r). Repeated small unloadings therefore never add up to more
+      recovery than one large one (a frozen-recovery reading drifts without bound
+      under a robot's thousands of load changes);
+    - the instantaneous strain on reloading starts where unloading left it and
+      rejoins the loading curve (F / (E1c A))**h at the force where the last
+      unloading began (Masing-like), so the elastic part forms a closed loop and does
+      not ratchet; creep alone accumulates, as in Park Fig. 2 (arrow 3).
+
+    Hysteresis is not modelled separately: it emerges from creep, hardening and
+    recovery (Park Section 3.3).
 
     The equivalent force I / T replaces the hereditary integral of the Kelvin-Voigt
     creep (MODEL_NOTES point 4); this is the paper's model, kept as printed.
@@ -179,11 +195,11 @@ class IntegratedModel(AbstractCableModel[IntegratedState]):
             t_total=zero,
             branch=jnp.array(1, jnp.int32),
             force_reversal=zero,
+            force_peak=zero,
             inst_reversal=zero,
             tau=zero,
-            set_strain=zero,
-            recovered_short=zero,
-            recovered_long=zero,
+            short_reversal=zero,
+            long_reversal=zero,
             parts=parts,
         )
 
@@ -203,39 +219,32 @@ class IntegratedModel(AbstractCableModel[IntegratedState]):
         area = cable.area
         branch = jnp.where(direction == 0, state.branch, direction).astype(jnp.int32)
         reversed_ = branch != state.branch
-        to_unloading = reversed_ & (branch < 0)
-        to_loading = reversed_ & (branch > 0)
+        loading = branch > 0
 
-        # A reversal happens at the previous sample; freeze what the old branch reached.
+        # A reversal happens at the previous sample: the new branch starts from there.
         prev = state.parts
         force_reversal = jnp.where(reversed_, state.force, state.force_reversal)
+        force_peak = jnp.where(reversed_ & ~loading, state.force, state.force_peak)
         inst_reversal = jnp.where(reversed_, prev.instantaneous, state.inst_reversal)
-        recovered_short = jnp.where(
-            to_loading,
-            state.recovered_short + prev.recovery_short,
-            state.recovered_short,
-        )
-        recovered_long = jnp.where(
-            to_loading, state.recovered_long + prev.recovery_long, state.recovered_long
-        )
-        # At reloading the loading law restarts from the unloading branch's
-        # instantaneous strain; the difference is a permanent set (strain continuity).
-        loading_at_reversal = self._static_loading(state, cable, state.force)
-        set_strain = jnp.where(
-            to_loading,
-            prev.instantaneous - loading_at_reversal,
-            state.set_strain,
-        )
-        del to_unloading
+        short_reversal = jnp.where(reversed_, prev.recovery_short, state.short_reversal)
+        long_reversal = jnp.where(reversed_, prev.recovery_long, state.long_reversal)
         tau = jnp.where(reversed_, 0.0, state.tau) + dt
 
         # Trapezoid impulse (MODEL_NOTES point 5); time under tension (point 6).
         impulse = state.impulse + 0.5 * (state.force + force) * dt
         t_total = state.t_total + jnp.where(state.force + force > 0, dt, 0.0)
 
-        loading_inst = self._static_loading(state, cable, force) + set_strain
+        # Reloading rejoins the loading curve at the last peak (Masing-like), so the
+        # instantaneous strain is continuous at the reversal and cannot ratchet.
+        static = self._static_loading(state, cable, force)
+        static_reversal = self._static_loading(state, cable, force_reversal)
+        span = force_peak - force_reversal
+        weight = jnp.clip(
+            (force_peak - force) / jnp.where(span > 0, span, 1.0), 0.0, 1.0
+        )
+        weight = jnp.where(span > 0, weight, 0.0)
+        loading_inst = static + (inst_reversal - static_reversal) * weight
         unloading_inst = inst_reversal - (force_reversal - force) / (self.E1r * area)
-        loading = branch > 0
         inst = jnp.where(loading, loading_inst, unloading_inst)
 
         # Park Eq. 5 with MODEL_NOTES point 2: F_eq (1 - e^{-T/t_c}) / (E2c A) + I/(eta0 A).
@@ -243,20 +252,27 @@ class IntegratedModel(AbstractCableModel[IntegratedState]):
             self.E2c * area
         ) + impulse / (self.eta0 * area)
 
+        # Recoveries relax towards Park's amplitudes while unloading (Eq. 4, 7) and
+        # back towards zero while loading, from their values at the reversal.
         f_eq = impulse / jnp.where(t_total > 0, t_total, 1.0)
-        short = f_eq * -jnp.expm1(-tau / self.t_r1) / (self.E2r * area)
         t_r2 = self.retardation_time_long(cable)
-        long = (force_reversal - force) * -jnp.expm1(-tau / t_r2) / (self.E3r * area)
-        short = jnp.where(loading, 0.0, short)
-        long = jnp.where(loading, 0.0, long)
+        decay_short = jnp.exp(-tau / self.t_r1)
+        decay_long = jnp.exp(-tau / t_r2)
+        amplitude_short = jnp.where(loading, 0.0, f_eq / (self.E2r * area))
+        amplitude_long = jnp.where(
+            loading, 0.0, (force_reversal - force) / (self.E3r * area)
+        )
+        short = amplitude_short * -jnp.expm1(-tau / self.t_r1) + short_reversal * (
+            decay_short
+        )
+        long = amplitude_long * -jnp.expm1(-tau / t_r2) + long_reversal * decay_long
 
         parts = StrainParts(
             instantaneous=inst,
             creep=creep,
-            recovery_short=recovered_short + short,
-            recovery_long=recovered_long + long,
+            recovery_short=short,
+            recovery_long=long,
         )
-        current = StrainParts(inst, creep, short, long)
         new_state = IntegratedState(
             force=force,
             strain=parts.total,
@@ -264,11 +280,11 @@ class IntegratedModel(AbstractCableModel[IntegratedState]):
             t_total=t_total,
             branch=branch,
             force_reversal=force_reversal,
+            force_peak=force_peak,
             inst_reversal=inst_reversal,
             tau=tau,
-            set_strain=set_strain,
-            recovered_short=recovered_short,
-            recovered_long=recovered_long,
-            parts=current,
+            short_reversal=short_reversal,
+            long_reversal=long_reversal,
+            parts=parts,
         )
         return new_state, parts
