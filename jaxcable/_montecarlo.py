@@ -532,7 +532,7 @@ class MonteCarloResult(eqx.Module):
 _AXIS = "draws"
 # `method="auto"` keeps every draw (exact percentiles) up to this many values.
 _EXACT_LIMIT = 2**24
-# Default chunk: about this many elongation values per chunk (bounded memory).
+# Default chunk: about this many elongation values per device (bounded memory).
 _CHUNK_VALUES = 2**23
 # Refuse histograms above this many bytes per device.
 _HISTOGRAM_LIMIT = 4 * 2**30
@@ -665,7 +665,7 @@ def _update(acc: _Accumulator, elongation, time, valid, status, lo, width, bins)
 
 
 @functools.lru_cache(maxsize=32)
-def _compiled(mesh: Mesh, local: int, load_axis, bins: int, keep: bool):
+def _compiled(mesh: Mesh, local: int, load_axis, bins: int, keep: bool, impl: str):
     """The jitted chunk function of one Monte-Carlo configuration: compiled once, then
     called once per chunk with the same shapes."""
     spec = P(_AXIS)
@@ -676,6 +676,8 @@ def _compiled(mesh: Mesh, local: int, load_axis, bins: int, keep: bool):
 
         def per_device(dyn, key, start, num_draws, acc, lo, width):
             parameters, cables, loads = eqx.combine(dyn, static)
+            # The key travels as raw key data (a plain global array on every host).
+            key = jax.random.wrap_key_data(key, impl=impl)
             elongation, time, valid, status = _local_draws(
                 parameters, cables, loads, key, start, num_draws, local, load_axis
             )
@@ -696,6 +698,13 @@ def _compiled(mesh: Mesh, local: int, load_axis, bins: int, keep: bool):
     return step
 
 
+def _global(x, sharding) -> Array:
+    """A host NumPy array as a global jax array laid out by `sharding`: each process
+    places the shards of its own devices (the same call on one or several hosts)."""
+    x = np.asarray(x)
+    return jax.make_array_from_callback(x.shape, sharding, lambda index: x[index])
+
+
 def _to_host(x) -> np.ndarray:
     """A global array as a NumPy array on this process (all-gathered across hosts)."""
     if getattr(x, "is_fully_addressable", True):
@@ -706,22 +715,28 @@ def _to_host(x) -> np.ndarray:
 
 
 class _Progress:
+    # A one-line text bar on stderr; the ETA leaves out the first chunk (compilation).
     def __init__(self, total: int, enabled: bool, width: int = 30):
         self.total = total
         self.enabled = enabled
         self.width = width
         self.start = _time.perf_counter()
+        self.first = None
 
     def update(self, done: int, draws: int):
         if not self.enabled:
             return
-        elapsed = _time.perf_counter() - self.start
-        frac = done / self.total
-        bar = "#" * int(round(frac * self.width))
-        eta = elapsed / frac - elapsed if frac > 0 else float("nan")
+        now = _time.perf_counter()
+        if self.first is None:
+            self.first = now
+        bar = "#" * int(round(done / self.total * self.width))
+        if done > 1:
+            eta = f"{(now - self.first) / (done - 1) * (self.total - done):.1f} s"
+        else:
+            eta = "?"
         sys.stderr.write(
             f"\rmonte_carlo [{bar:<{self.width}}] {done}/{self.total} chunks, "
-            f"{draws} draws, {elapsed:.1f} s, ETA {eta:.1f} s "
+            f"{draws} draws, {now - self.start:.1f} s, ETA {eta} "
         )
         if done == self.total:
             sys.stderr.write("\n")
@@ -954,7 +969,9 @@ def monte_carlo(
         scalars: one cable).
     - `loads`: a [`jaxcable.ForceHistory`][] (time-stamped forces) or a
         [`jaxcable.Protocol`][] (a rate-driven test), of shape `(samples,)` (shared) or
-        `(cables, samples)`.
+        `(cables, samples)` (for protocols: stack equal-length ones, see
+        [`jaxcable.Protocol.pad`][], with
+        `jax.tree_util.tree_map(lambda *a: jnp.stack(a), *protocols)`).
     - `key`: a JAX PRNG key (`jax.random.key(seed)`); no default, for reproducibility.
     - `num_draws`: the number of parameter draws.
     - `percentiles`: the percentile levels to compute, in percent (0-100).
@@ -1030,10 +1047,16 @@ def monte_carlo(
     mesh = Mesh(np.asarray(devices), (_AXIS,))
     sharded = NamedSharding(mesh, P(_AXIS))
     replicated = NamedSharding(mesh, P())
-    step = _compiled(mesh, local, load_axis, hist_bins, exact)
+    step = _compiled(mesh, local, load_axis, hist_bins, exact, jax.random.key_impl(key))
+
+    # Every input becomes a global array replicated over the mesh (on several hosts,
+    # every process passes the same values).
+    dyn, static = eqx.partition((parameters, cables, loads), eqx.is_array)
+    dyn = jax.tree_util.tree_map(lambda x: _global(x, replicated), dyn)
+    parameters, cables, loads = eqx.combine(dyn, static)
 
     def zeros(shape, dt=dtype, fill=0):
-        return jax.device_put(jnp.full((ndev, *shape), fill, dt), sharded)
+        return _global(np.full((ndev, *shape), fill, dt), sharded)
 
     def fresh():
         return _Accumulator(
@@ -1049,15 +1072,15 @@ def monte_carlo(
             ),
         )
 
-    key = jax.device_put(key, replicated)
-    total = jnp.asarray(num_draws, jnp.int32)
+    key_data = _global(jax.random.key_data(key), replicated)
+    total = _global(np.int32(num_draws), replicated)
 
     def run(c, acc, lo, width):
-        start = jnp.asarray(c * chunk, jnp.int32)
-        return step(parameters, cables, loads, key, start, total, acc, lo, width)
+        start = _global(np.int32(c * chunk), replicated)
+        return step(parameters, cables, loads, key_data, start, total, acc, lo, width)
 
     def put(x):
-        return jax.device_put(jnp.asarray(x, dtype), replicated)
+        return _global(np.asarray(x, dtype), replicated)
 
     lo = np.zeros((ncables, samples), dtype)
     width = np.ones((ncables, samples), dtype)
@@ -1103,13 +1126,13 @@ def monte_carlo(
     time_mean = host.time_mean[0].astype(float)
     for d in range(1, ndev):
         cd = host.count[d].astype(float)
-        total = count + cd
-        safe = np.maximum(total, 1.0)[:, None]
+        merged = count + cd
+        safe = np.maximum(merged, 1.0)[:, None]
         delta = host.mean[d] - mean
         time_mean = time_mean + (host.time_mean[d] - time_mean) * (cd[:, None] / safe)
         mean = mean + delta * (cd[:, None] / safe)
         m2 = m2 + host.m2[d] + delta**2 * (count * cd)[:, None] / safe
-        count = total
+        count = merged
     minimum = host.minimum.min(axis=0).astype(float)
     maximum = host.maximum.max(axis=0).astype(float)
     status = host.status.sum(axis=0)
