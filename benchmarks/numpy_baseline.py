@@ -111,8 +111,8 @@ def simulate_rate_test_numpy(
     # Model state (jaxcable.IntegratedState) and driver state (CableState).
     force_prev, strain_prev, impulse, t_total = zeros(), zeros(), zeros(), zeros()
     branch = np.ones(batch, int)
-    force_rev, inst_rev, tau, set_strain = zeros(), zeros(), zeros(), zeros()
-    rec_short, rec_long = zeros(), zeros()
+    force_rev, force_peak, inst_rev, tau = zeros(), zeros(), zeros(), zeros()
+    short_rev, long_rev = zeros(), zeros()
     p_inst, p_short, p_long = zeros(), zeros(), zeros()  # last sample's own parts
     t_now, last_step = zeros(), zeros()
 
@@ -128,18 +128,22 @@ def simulate_rate_test_numpy(
         # Branch bookkeeping at the previous sample (independent of the step length).
         new_branch = branch if d == 0 else np.full(batch, d)
         rev = new_branch != branch
-        to_loading = rev & (new_branch > 0)
-        f_rev = np.where(rev, force_prev, force_rev)
-        i_rev = np.where(rev, p_inst, inst_rev)
-        r_short = np.where(to_loading, rec_short + p_short, rec_short)
-        r_long = np.where(to_loading, rec_long + p_long, rec_long)
-        at_reversal = _static_loading(p, area, strain_prev, force_prev)
-        s_set = np.where(to_loading, p_inst - at_reversal, set_strain)
-        tau0 = np.where(rev, 0.0, tau)
         loading = new_branch > 0
+        f_rev = np.where(rev, force_prev, force_rev)
+        f_peak = np.where(rev & ~loading, force_prev, force_peak)
+        i_rev = np.where(rev, p_inst, inst_rev)
+        s_rev = np.where(rev, p_short, short_rev)
+        l_rev = np.where(rev, p_long, long_rev)
+        tau0 = np.where(rev, 0.0, tau)
+        # Reloading rejoins the loading curve at the last peak (Masing-like).
+        span = f_peak - f_rev
+        weight = np.where(
+            span > 0, np.clip((f_peak - F) / np.where(span > 0, span, 1.0), 0, 1), 0.0
+        )
+        static_rev = _static_loading(p, area, strain_prev, f_rev)
         inst = np.where(
             loading,
-            _static_loading(p, area, strain_prev, F) + s_set,
+            _static_loading(p, area, strain_prev, F) + (i_rev - static_rev) * weight,
             i_rev - (f_rev - F) / (p["E1r"] * area),
         )
         d_impulse = 0.5 * (force_prev + F)
@@ -161,18 +165,18 @@ def simulate_rate_test_numpy(
             ) + d_impulse / (p["eta0"] * area)
             feq = imp / Ts
             dfeq = np.where(pos, (d_impulse * Ts - imp * d_ttotal) / Ts**2, d_impulse)
-            e1 = -np.expm1(-tau_ / p["t_r1"])
-            de1 = np.exp(-tau_ / p["t_r1"]) / p["t_r1"]
-            short = feq * e1 / (p["E2r"] * area)
-            dshort = (dfeq * e1 + feq * de1) / (p["E2r"] * area)
-            e2 = -np.expm1(-tau_ / t_r2)
-            long = (f_rev - F) * e2 / (p["E3r"] * area)
-            dlong = (f_rev - F) * np.exp(-tau_ / t_r2) / t_r2 / (p["E3r"] * area)
-            short = np.where(loading, 0.0, short)
-            long = np.where(loading, 0.0, long)
-            dshort = np.where(loading, 0.0, dshort)
-            dlong = np.where(loading, 0.0, dlong)
-            total = inst + creep - (r_short + short) - (r_long + long)
+            # Recoveries relax towards Park's amplitudes while unloading, back to
+            # zero while loading, from their values at the reversal.
+            x1 = np.exp(-tau_ / p["t_r1"])
+            amp_s = np.where(loading, 0.0, feq / (p["E2r"] * area))
+            damp_s = np.where(loading, 0.0, dfeq / (p["E2r"] * area))
+            short = amp_s * (1 - x1) + s_rev * x1
+            dshort = damp_s * (1 - x1) + (amp_s - s_rev) * x1 / p["t_r1"]
+            x2 = np.exp(-tau_ / t_r2)
+            amp_l = np.where(loading, 0.0, (f_rev - F) / (p["E3r"] * area))
+            long = amp_l * (1 - x2) + l_rev * x2
+            dlong = (amp_l - l_rev) * x2 / t_r2
+            total = inst + creep - short - long
             return total, dcreep - dshort - dlong, (creep, short, long)
 
         def residual(dt):
@@ -210,8 +214,8 @@ def simulate_rate_test_numpy(
 
         total, _, (creep, short, long) = strain_and_slope(dt)
         if m:
-            branch, force_rev, inst_rev = new_branch, f_rev, i_rev
-            rec_short, rec_long, set_strain = r_short, r_long, s_set
+            branch, force_rev, force_peak, inst_rev = new_branch, f_rev, f_peak, i_rev
+            short_rev, long_rev = s_rev, l_rev
             impulse = impulse + d_impulse * dt
             t_total = t_total + d_ttotal * dt
             tau = tau0 + dt
