@@ -147,7 +147,8 @@ def simulate_rate_test_numpy(
             i_rev - (f_rev - F) / (p["E1r"] * area),
         )
         d_impulse = 0.5 * (force_prev + F)
-        d_ttotal = (force_prev + F > 0).astype(float)
+        # Time under tension: above 1e-4 of the (default 2000 N) breaking load.
+        d_ttotal = (np.maximum(force_prev, F) > 1e-4 * 2000.0).astype(float)
 
         def strain_and_slope(dt):
             """Total strain after a step dt and its derivative d strain / d dt."""

@@ -230,9 +230,13 @@ class IntegratedModel(AbstractCableModel[IntegratedState]):
         long_reversal = jnp.where(reversed_, prev.recovery_long, state.long_reversal)
         tau = jnp.where(reversed_, 0.0, state.tau) + dt
 
-        # Trapezoid impulse (MODEL_NOTES point 5); time under tension (point 6).
+        # Trapezoid impulse (MODEL_NOTES point 5); time under tension (point 6). A
+        # step counts as under tension above 1e-4 of the breaking load, so that a
+        # load cell's noise around 0 N during an hours-long rest does not count the
+        # rest as loading (which would dilute the equivalent force I / T).
         impulse = state.impulse + 0.5 * (state.force + force) * dt
-        t_total = state.t_total + jnp.where(state.force + force > 0, dt, 0.0)
+        tensioned = jnp.maximum(state.force, force) > 1e-4 * cable.breaking_load
+        t_total = state.t_total + jnp.where(tensioned, dt, 0.0)
 
         # Reloading rejoins the loading curve at the last peak (Masing-like), so the
         # instantaneous strain is continuous at the reversal and cannot ratchet.

@@ -62,7 +62,9 @@ def synthesize(
     rng = np.random.default_rng(seed)
     time = np.asarray(traj.time, dtype=float)
     n = time.shape[0]
-    force = np.clip(np.asarray(traj.force) + force_noise * rng.standard_normal(n), 0, None)
+    force = np.clip(
+        np.asarray(traj.force) + force_noise * rng.standard_normal(n), 0, None
+    )
     elongation = np.asarray(traj.elongation) + elongation_noise * rng.standard_normal(n)
     temperature = (
         temperature_C

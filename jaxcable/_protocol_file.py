@@ -1,0 +1,316 @@
+"""The protocol file of `jaxcable simulate`: a rate-driven test described in JSON.
+
+```json
+{
+  "id": "sk78-300mm-100N",
+  "material": "Dyneema SK78",
+  "length_mm": 300,
+  "diameter_mm": 3,
+  "rate_mm_per_min": 3,
+  "segments": [
+    {"cycles": 10, "force_max_N": 100, "samples_per_ramp": 200},
+    {"rest_h": 24},
+    {"ramp_to_N": 50, "samples": 100},
+    {"hold_s": 60, "force_N": 50},
+    {"ramp_to_N": 0, "samples": 100}
+  ]
+}
+```
+
+Top-level keys: `length_mm` (required, the free length, mm), `diameter_mm` (default
+3 mm), `rate_mm_per_min` (the crosshead speed of every ramp, default 3 mm/min),
+`segments` (required, a non-empty list) and the optional strings `id`, `material`,
+`description` (copied to the output's metadata). The test starts unloaded (0 N) at
+t = 0 and runs the segments in order; each segment is named by exactly one of these
+keys:
+
+| segment | keys (units; default) | what it does |
+| --- | --- | --- |
+| cycles | `cycles` (count), `force_max_N` (N), `force_min_N` (N; 0), `samples_per_ramp` (200), `peak_hold_s` (s; 0) | `cycles` ramps from the current force up to `force_max_N` and back down to `force_min_N` |
+| ramp | `ramp_to_N` (N), `samples` (100) | one ramp from the current force to `ramp_to_N` |
+| hold | `hold_s` (s), `force_N` (N; the current force), `samples` (10) | holds the current force (creep); `force_N`, if given, must equal it |
+| rest | `rest_h` (h) or `rest_s` (s), `samples` (24) | a rest at 0 N (recovery); the force must be 0 when it starts |
+
+Ramps run at the crosshead speed; the time of each ramp sample is solved by the model
+([`jaxcable.simulate_rate_test`][]). Unknown keys are errors (a misspelt key would
+otherwise be silently ignored).
+"""
+
+import json
+import math
+import os
+import pathlib
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from ._cable import Cable
+from ._io import DEFAULT_DIAMETER_MM, DEFAULT_RATE_MM_PER_MIN
+from ._protocol import Protocol
+
+
+_TOP_LEVEL = (
+    "length_mm",
+    "diameter_mm",
+    "rate_mm_per_min",
+    "segments",
+    "id",
+    "material",
+    "description",
+)
+_STRINGS = ("id", "material", "description")
+
+# Segment kind -> (the key that names it, its other keys). `rest` is named by either
+# `rest_h` or `rest_s`.
+_SEGMENTS = {
+    "cycles": ("force_max_N", "force_min_N", "samples_per_ramp", "peak_hold_s"),
+    "ramp_to_N": ("samples",),
+    "hold_s": ("force_N", "samples"),
+    "rest_h": ("samples",),
+    "rest_s": ("samples",),
+}
+_DEFAULT_SAMPLES_PER_RAMP = 200
+_DEFAULT_RAMP_SAMPLES = 100
+_DEFAULT_HOLD_SAMPLES = 10
+_DEFAULT_REST_SAMPLES = 24
+# A hold's `force_N` equals the current force when it is within this (relative).
+_SAME_FORCE = 1e-9
+
+
+class ProtocolFile(NamedTuple):
+    """A protocol file, parsed.
+
+    - `protocol`: the [`jaxcable.Protocol`][] (its first sample is 0 N at t = 0).
+    - `cable`: the [`jaxcable.Cable`][] (SI) it is run on.
+    - `metadata`: `length_mm`, `diameter_mm`, `rate_mm_per_min` and the file's
+        strings, for the output file's `# key: value` block.
+    - `segment_starts`: the index of each segment's first sample (sample 0 is the
+        unloaded start), for error messages.
+    """
+
+    protocol: Protocol
+    cable: Cable
+    metadata: dict[str, float | str]
+    segment_starts: tuple[int, ...]
+
+    def segment_of(self, sample: int) -> int | None:
+        """The index of the segment sample `sample` belongs to (None: the start)."""
+        starts = np.asarray(self.segment_starts)
+        k = int(np.searchsorted(starts, sample, side="right")) - 1
+        return None if k < 0 else k
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+class _Reader:
+    """Typed access to one JSON object, with errors naming the file and key path."""
+
+    def __init__(self, path: str, where: str, obj: dict):
+        self.path = path
+        self.where = where
+        self.obj = obj
+
+    def _name(self, key: str) -> str:
+        return f"{self.where}.{key}" if self.where else key
+
+    def error(self, key: str | None, message: str) -> ValueError:
+        name = self.where if key is None else self._name(key)
+        return ValueError(f"{self.path}, {name}: {message}" if name else message)
+
+    def number(self, key: str, unit: str, default=None, *, allow_zero=False) -> float:
+        """The finite number at `key` (> 0, or >= 0 with `allow_zero`); `default`
+        when absent, or an error naming the missing key when `default` is None."""
+        if key not in self.obj:
+            if default is None:
+                where = f"{self.path}, {self.where}" if self.where else self.path
+                raise ValueError(f"{where}: missing key '{key}' ({unit}).")
+            return float(default)
+        value = self.obj[key]
+        if not _is_number(value) or not math.isfinite(value):
+            raise self.error(
+                key, f"{json.dumps(value)} is not a finite number ({unit})."
+            )
+        if not (value > 0 or (allow_zero and value == 0)):
+            bound = ">= 0" if allow_zero else "> 0"
+            raise self.error(key, f"{value:g} {unit} must be {bound}.")
+        return float(value)
+
+    def count(self, key: str, default: int) -> int:
+        if key not in self.obj:
+            return default
+        value = self.obj[key]
+        if not (_is_number(value) and float(value).is_integer() and value >= 1):
+            raise self.error(key, f"{json.dumps(value)} is not an integer >= 1.")
+        return int(value)
+
+
+def read_protocol(path: str | os.PathLike) -> ProtocolFile:
+    """Read a rate-driven protocol file (the JSON schema of this module's docstring).
+
+    **Arguments:**
+
+    - `path`: the `.json` file.
+
+    **Returns:**
+
+    A `ProtocolFile`: the [`jaxcable.Protocol`][], the [`jaxcable.Cable`][] and the
+    metadata for the output file.
+
+    **Raises:**
+
+    `ValueError` naming the file and the key (e.g. `segments[2].force_max_N`) of the
+    first problem: invalid JSON (with its line and column), a missing or unknown key,
+    a value that is not a positive number or count, a segment that does not follow on
+    from the force the previous one ends at, or a force above the cable's breaking
+    load. `OSError` when the file cannot be read.
+    """
+    path = str(path)
+    text = pathlib.Path(path).read_text(encoding="utf-8")
+    try:
+        doc = json.loads(text)
+    except json.JSONDecodeError as e:
+        raise ValueError(
+            f"{path}, line {e.lineno}, column {e.colno}: invalid JSON: {e.msg}."
+        ) from None
+    if not isinstance(doc, dict):
+        raise ValueError(
+            f"{path}: a protocol file is a JSON object with length_mm and segments, "
+            f"got a {type(doc).__name__}."
+        )
+    for key in doc:
+        if key not in _TOP_LEVEL:
+            raise ValueError(
+                f"{path}, {key}: unknown key (a protocol file has "
+                f"{', '.join(_TOP_LEVEL)})."
+            )
+    top = _Reader(path, "", doc)
+    length = top.number("length_mm", "mm")
+    diameter = top.number("diameter_mm", "mm", DEFAULT_DIAMETER_MM)
+    rate = top.number("rate_mm_per_min", "mm/min", DEFAULT_RATE_MM_PER_MIN)
+    metadata: dict[str, float | str] = {}
+    for key in _STRINGS:
+        if key in doc:
+            if not isinstance(doc[key], str):
+                raise top.error(key, f"{json.dumps(doc[key])} is not a string.")
+            metadata[key] = doc[key]
+    metadata.update(length_mm=length, diameter_mm=diameter, rate_mm_per_min=rate)
+    cable = Cable(length=length * 1e-3, diameter=diameter * 1e-3, speed=rate / 6e4)
+    limit = float(cable.breaking_load)
+
+    if "segments" not in doc:
+        raise ValueError(
+            f"{path}: missing key 'segments' (a list such as "
+            '[{"cycles": 10, "force_max_N": 100}, {"rest_h": 24}]).'
+        )
+    segments = doc["segments"]
+    if not isinstance(segments, list) or not segments:
+        raise top.error("segments", "must be a non-empty list of segment objects.")
+
+    parts = [Protocol.start()]
+    starts = []
+    num_samples = 1
+    force = 0.0  # the force the previous segment ends at, N
+
+    def force_value(reader: _Reader, key: str, default=None) -> float:
+        if default is not None and key not in reader.obj:
+            return default
+        value = reader.number(key, "N", allow_zero=True)
+        if value > limit:
+            raise reader.error(
+                key, f"{value:g} N exceeds the cable's breaking load ({limit:g} N)."
+            )
+        return value
+
+    for i, segment in enumerate(segments):
+        where = f"segments[{i}]"
+        if not isinstance(segment, dict):
+            raise ValueError(
+                f"{path}, {where}: a segment is a JSON object such as "
+                f'{{"ramp_to_N": 50}}, got {json.dumps(segment)}.'
+            )
+        kinds = [k for k in _SEGMENTS if k in segment]
+        if len(kinds) != 1:
+            found = f"has {', '.join(kinds)}" if kinds else "has none"
+            raise ValueError(
+                f"{path}, {where}: a segment has exactly one of "
+                f"{', '.join(_SEGMENTS)}; this one {found}."
+            )
+        kind = kinds[0]
+        for key in segment:
+            if key != kind and key not in _SEGMENTS[kind]:
+                raise ValueError(
+                    f"{path}, {where}.{key}: unknown key for a '{kind}' segment "
+                    f"(it takes {', '.join((kind, *_SEGMENTS[kind]))})."
+                )
+        r = _Reader(path, where, segment)
+        if kind == "cycles":
+            cycles = r.count("cycles", 1)
+            high = force_value(r, "force_max_N")
+            low = force_value(r, "force_min_N", 0.0)
+            spr = r.count("samples_per_ramp", _DEFAULT_SAMPLES_PER_RAMP)
+            hold = r.number("peak_hold_s", "s", 0.0, allow_zero=True)
+            if not high > force:
+                raise r.error(
+                    "force_max_N",
+                    f"{high:g} N must exceed the force the previous segment ends "
+                    f"at ({force:g} N).",
+                )
+            if not low < high:
+                raise r.error(
+                    "force_min_N", f"{low:g} N must be below force_max_N ({high:g} N)."
+                )
+            segment_parts = []
+            start = force
+            for _ in range(cycles):
+                segment_parts.append(Protocol.ramp(start, high, spr))
+                if hold > 0:
+                    segment_parts.append(Protocol.hold(high, hold, 1))
+                segment_parts.append(Protocol.ramp(high, low, spr))
+                start = low
+            force = low
+        elif kind == "ramp_to_N":
+            target = force_value(r, "ramp_to_N")
+            samples = r.count("samples", _DEFAULT_RAMP_SAMPLES)
+            if target == force:
+                raise r.error(
+                    "ramp_to_N",
+                    f"the previous segment already ends at {force:g} N; a ramp "
+                    "needs another force.",
+                )
+            segment_parts = [Protocol.ramp(force, target, samples)]
+            force = target
+        elif kind == "hold_s":
+            duration = r.number("hold_s", "s")
+            held = force_value(r, "force_N", force)
+            samples = r.count("samples", _DEFAULT_HOLD_SAMPLES)
+            if abs(held - force) > _SAME_FORCE * max(1.0, abs(force)):
+                raise r.error(
+                    "force_N",
+                    f"{held:g} N differs from the force the previous segment ends "
+                    f'at ({force:g} N); add {{"ramp_to_N": {held:g}}} before the '
+                    "hold.",
+                )
+            segment_parts = [Protocol.hold(force, duration, samples)]
+        else:  # rest_h / rest_s
+            duration = r.number(kind, "h" if kind == "rest_h" else "s")
+            if kind == "rest_h":
+                duration *= 3600.0
+            samples = r.count("samples", _DEFAULT_REST_SAMPLES)
+            if force != 0.0:
+                raise r.error(
+                    kind,
+                    f"a rest is at 0 N but the previous segment ends at {force:g} "
+                    'N; add {"ramp_to_N": 0} before it.',
+                )
+            segment_parts = [Protocol.rest(duration, samples)]
+        starts.append(num_samples)
+        num_samples += sum(p.num_samples for p in segment_parts)
+        parts.extend(segment_parts)
+    return ProtocolFile(
+        protocol=Protocol.concatenate(*parts),
+        cable=cable,
+        metadata=metadata,
+        segment_starts=tuple(starts),
+    )
