@@ -99,7 +99,9 @@ class IntegratedModel(AbstractCableModel[IntegratedState]):
     The default parameters are a Dyneema SK78 3 mm set obtained as MODEL_NOTES point 9
     describes: `jaxcable.calibrate_sk78()` (Levenberg-Marquardt on the errors, in %, of
     the numbers Park prints: creep ratio, residual elongations, Table 3; all < 5 %),
-    rounded to 4 digits; see `jaxcable._sk78` and `notebooks/01_papers.ipynb`.
+    rounded to 4 digits, under physical constraints (gamma >= 1, an instantaneous set
+    >= 0, a short-term recovery slower than the crosshead, no rest ending shorter than
+    new); see `jaxcable._sk78` and `notebooks/01_papers.ipynb`.
 
     **Fields (SI):**
 
@@ -113,18 +115,18 @@ class IntegratedModel(AbstractCableModel[IntegratedState]):
     - `lambda1` (1/s), `lambda2` (s): long-term retardation time law (Eq. 8).
     """
 
-    E1c: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=2.201e9)
-    beta: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.04352)
-    gamma: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.07555)
-    E1r: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=2.350e9)
-    E2c: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=3.645e8)
-    t_c: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=9.223)
-    eta0: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=6.815e11)
-    E2r: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=1.465e10)
-    t_r1: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=111.1)
-    E3r: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=8.003e8)
-    lambda1: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=2.744e-3)
-    lambda2: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=-119.0)
+    E1c: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=2.566e9)
+    beta: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.08153)
+    gamma: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=1.344)
+    E1r: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=2.670e9)
+    E2c: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=3.799e8)
+    t_c: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=8.632)
+    eta0: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=4.794e11)
+    E2r: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=3.191e9)
+    t_r1: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=53.11)
+    E3r: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=7.989e8)
+    lambda1: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=2.883e-3)
+    lambda2: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=-99.73)
 
     def __check_init__(self):
         for name in (

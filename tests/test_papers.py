@@ -13,17 +13,17 @@ from jaxcable import _sk78
 
 # Errors (%) of the default set, as measured when it was fitted (samples_per_ramp=200).
 MEASURED_ERRORS = {
-    "creep_ratio_300mm": 0.12,
-    "residual_300mm": -0.13,
-    "residual_100mm": 1.59,
-    "recovery_100mm_24h": 3.45,
-    "recovery_100mm_48h": 3.48,
-    "recovery_100mm_72h": 2.16,
-    "recovery_300mm_24h": -1.83,
-    "recovery_300mm_48h": 4.29,
-    "recovery_300mm_72h": -4.70,
-    "peak_300mm_50mm_min": 0.10,
-    "peak_300mm_3mm_min": -2.03,
+    "creep_ratio_300mm": -0.05,
+    "residual_300mm": 0.22,
+    "residual_100mm": 0.72,
+    "recovery_100mm_24h": 3.04,
+    "recovery_100mm_48h": 3.08,
+    "recovery_100mm_72h": 1.77,
+    "recovery_300mm_24h": -2.26,
+    "recovery_300mm_48h": 4.13,
+    "recovery_300mm_72h": -4.44,
+    "peak_300mm_50mm_min": 0.05,
+    "peak_300mm_3mm_min": -1.13,
 }
 # Targets the model cannot reach within 5 % (none reached at present).
 MISSED = set()
@@ -64,6 +64,51 @@ def test_cyclic_behaviour():
         assert c["stiffness_converges"], (force, c["stiffness"])
         assert c["energy_falls"], (force, c["energy"])
         assert c["elongation_grows"], (force, c["valley"])
+
+
+def test_default_set_is_physical():
+    # The constraints of the fit (jaxcable._sk78): h = 1 + beta eps**gamma is
+    # differentiable at eps = 0; the unloading is stiffer than the hardened loading
+    # secant (instantaneous set >= 0 in every cycle to 100 N or more, strain <= 10 %);
+    # the short-term recovery is slower than Park's slowest crosshead.
+    model = jc.IntegratedModel()
+    assert 1.0 <= float(model.gamma) <= 5.0
+    e1r_min = _sk78._e1r_min(model.E1c, model.beta, model.gamma)
+    assert float(model.E1r) > float(e1r_min) > float(model.E1c)
+    assert float(model.E2r) > float(_sk78._e2r_min(model.t_r1))
+    # Directly: the instantaneous strain at 0 N after each of 10 cycles is >= 0.
+    n = 50
+    protocol = jc.Protocol.cycles(150.0, cycles=10, samples_per_ramp=n)
+    traj = jc.simulate_rate_test(model, jc.Cable(length=0.3), protocol)
+    valleys = np.asarray(traj.parts.instantaneous)[2 * n :: 2 * n]
+    assert valleys.shape == (10,) and np.all(valleys >= 0), valleys
+    assert float(np.max(traj.strain)) < _sk78._SET_STRAIN
+
+
+def test_rests_end_no_shorter_than_new():
+    # Soft targets of the fit: after 10 cycles to 100 N at 3 mm/min, the 100 and 300
+    # mm cables end the 24, 48 and 72 h rests longer than new.
+    _, ok, rest_ends, _ = _sk78._simulate_targets(
+        jc.IntegratedModel(), 100, None, throw=False
+    )
+    assert bool(np.all(ok))
+    assert np.all(np.asarray(rest_ends) > 0), rest_ends
+
+
+@pytest.mark.parametrize("length", [0.1, 0.3])
+@pytest.mark.parametrize("rate_mm_per_min", [3.0, 50.0])
+@pytest.mark.parametrize("force", [100.0, 150.0])
+def test_park_protocol_simulates(length, rate_mm_per_min, force):
+    # Park's protocol (10 cycles, a rest, the re-stretch) at his lengths, rates and
+    # forces: the re-stretch passes through the strain at which h = 1 + beta
+    # eps**gamma starts, and must still have a loading time for every force sample.
+    from jaxcable._synthetic import park_protocol
+
+    cable = jc.Cable(length=length, speed=rate_mm_per_min * 1e-3 / 60)
+    for rest_hours in (24.0, 48.0, 72.0):
+        protocol = park_protocol(force, rest_hours=rest_hours, samples_per_ramp=50)
+        traj = jc.simulate_rate_test(jc.IntegratedModel(), cable, protocol, throw=False)
+        assert traj.result == jc.RESULTS.successful, (rest_hours, traj.result)
 
 
 def test_rate_effect():
