@@ -18,6 +18,26 @@ from ._baselines import (
     HookeState as HookeState,
 )
 from ._cable import Cable as Cable
+from ._diagnose import (
+    Candidate as Candidate,
+    Diagnosis as Diagnosis,
+    diagnose as diagnose,
+    residual_structure as residual_structure,
+    write_diagnosis_report as write_diagnosis_report,
+)
+from ._extensions import (
+    EXTENSIONS as EXTENSIONS,
+    BeddingIn as BeddingIn,
+    Hereditary as Hereditary,
+    SecondRetardation as SecondRetardation,
+    SensorDrift as SensorDrift,
+    StressNonlinearCreep as StressNonlinearCreep,
+    TemperatureShift as TemperatureShift,
+    TemperatureShiftWLF as TemperatureShiftWLF,
+    TerminationCompliance as TerminationCompliance,
+    log_shift_arrhenius as log_shift_arrhenius,
+    log_shift_wlf as log_shift_wlf,
+)
 from ._fit import (
     FitResult as FitResult,
     IdentifiabilityWarning as IdentifiabilityWarning,
@@ -79,6 +99,10 @@ from ._surface import (
     PIAO_TABLE3 as PIAO_TABLE3,
     ParameterSurface as ParameterSurface,
     piao_five_element as piao_five_element,
+)
+from ._synthetic import (
+    hidden_effect_dataset as hidden_effect_dataset,
+    hidden_effect_model as hidden_effect_model,
 )
 
 

@@ -13,6 +13,13 @@ def _is_concrete(x) -> bool:
     return not isinstance(x, jax.core.Tracer)
 
 
+# The fields of a Cable, in order (one place to list them for checks and batching).
+CABLE_FIELDS = ("length", "diameter", "speed", "breaking_load", "temperature")
+
+# Kelvin at 0 °C: data files record temperature in °C, Cable holds kelvin.
+ZERO_CELSIUS = 273.15
+
+
 class Cable(eqx.Module):
     """One cable (or a batch of cables, for `jax.vmap`) and the speed it is stretched at.
 
@@ -29,6 +36,9 @@ class Cable(eqx.Module):
         rate-driven test (Park Eq. 6) and the long-term retardation time (Park Eq. 8).
     - `breaking_load`: force above which inputs are rejected, N (default 2000 N, the
         rated load of the 3 mm SK78 cable in Park Section 2.1).
+    - `temperature`: temperature of the cable, K (default 293.15 K = 20 °C). Only
+        temperature-dependent models read it (e.g. [`jaxcable.TemperatureShift`][]);
+        the fit and the drivers set it per sample from a test's temperature record.
     """
 
     length: Float[Array, "*batch"] = eqx.field(converter=jnp.asarray)
@@ -37,9 +47,12 @@ class Cable(eqx.Module):
     breaking_load: Float[Array, "*batch"] = eqx.field(
         converter=jnp.asarray, default=2000.0
     )
+    temperature: Float[Array, "*batch"] = eqx.field(
+        converter=jnp.asarray, default=293.15
+    )
 
     def __check_init__(self):
-        for name in ("length", "diameter", "speed", "breaking_load"):
+        for name in CABLE_FIELDS:
             value = getattr(self, name)
             if not _is_concrete(value):
                 continue
@@ -64,7 +77,7 @@ class Cable(eqx.Module):
 
 def check_scalar_cable(cable: Cable) -> None:
     """Raise `ValueError` unless every field of `cable` is a scalar (one cable)."""
-    for name in ("length", "diameter", "speed", "breaking_load"):
+    for name in CABLE_FIELDS:
         shape = jnp.shape(getattr(cable, name))
         if shape != ():
             raise ValueError(

@@ -399,24 +399,32 @@ def _read_tests(
     return tests, noise
 
 
+def _data_options(args) -> dict:
+    """`read_test` keyword arguments from the data options (`_add_data_options`)."""
+    return dict(
+        columns=args.columns,
+        skip_rows=args.skip_rows,
+        length_mm=args.length_mm,
+        diameter_mm=args.diameter_mm,
+        rate_mm_per_min=args.rate_mm_per_min,
+        detect_slack=not args.no_slack,
+    )
+
+
 def _reversal_tolerance(args, noise: float) -> float:
-    """`--reversal-tolerance-N`, or 3 x the force noise of the data when not given:
-    a noisy force must not flip the model between its loading and unloading laws at
-    every sample (Park's model has one law for each)."""
+    """`--reversal-tolerance-N`, or `_slack.REVERSAL_NOISE_FACTOR` x the force noise
+    of the data when not given: a noisy force must not flip the model between its
+    loading and unloading laws (Park's model has one law for each)."""
     if args.reversal_tolerance_N is not None:
         return args.reversal_tolerance_N
-    return _NOISE_FACTOR * noise
-
-
-# The default reversal tolerance, in force-noise standard deviations.
-_NOISE_FACTOR = 3.0
+    return _slack.REVERSAL_NOISE_FACTOR * noise
 
 
 def _tolerance_line(args, tolerance: float) -> str:
     how = (
         "--reversal-tolerance-N"
         if args.reversal_tolerance_N is not None
-        else f"{_NOISE_FACTOR:g} x the force noise of the data"
+        else f"{_slack.REVERSAL_NOISE_FACTOR:g} x the force noise of the data"
     )
     return f"reversal tolerance {tolerance:.3g} N ({how})"
 
@@ -516,15 +524,7 @@ def _fit(args) -> int:
     fit_names = _names_option(args.fit, "--fit", model, name)
     per_test = _names_option(args.per_test, "--per-test", model, name)
     _require_folder_of(args.out, "--out")
-    options = dict(
-        columns=args.columns,
-        skip_rows=args.skip_rows,
-        length_mm=args.length_mm,
-        diameter_mm=args.diameter_mm,
-        rate_mm_per_min=args.rate_mm_per_min,
-        detect_slack=not args.no_slack,
-    )
-    tests, noise = _read_tests(args.data, options, args.every, progress)
+    tests, noise = _read_tests(args.data, _data_options(args), args.every, progress)
     tolerance = _reversal_tolerance(args, noise)
     print(f"read {len(tests)} file(s):")
     print("\n".join(_describe_tests(tests, args.every)))
@@ -572,6 +572,73 @@ def _fit(args) -> int:
         )
     if failure is not None:
         raise failure
+    return 0
+
+
+# ----------------------------------------------------------------------------------
+# diagnose: what the model gets wrong, the named cause, the gain on held-out data
+
+
+def _run_diagnosis(model, name, tests, *, args, tolerance, progress, log):
+    """`jaxcable.diagnose` with the command line's options."""
+    from ._diagnose import diagnose
+    from ._report import Progress
+
+    bar = Progress("diagnosing", enabled=progress)
+    with bar:
+        try:
+            return diagnose(
+                tests,
+                model,
+                fit_names=args.fit.split(",") if args.fit else None,
+                candidates=args.candidates.split(",") if args.candidates else None,
+                split=args.split,
+                holdout=args.holdout,
+                folds=args.folds,
+                multistart=args.starts,
+                max_steps=args.max_steps,
+                reversal_tolerance=tolerance,
+                key=jax.random.key(args.seed),
+                progress=lambda message: print(message, file=log, flush=True),
+            )
+        except ValueError as e:
+            raise _CliError(f"cannot diagnose with model '{name}': {e}") from None
+
+
+def _diagnose(args) -> int:
+    from ._diagnose import write_diagnosis_report
+
+    progress = _show_progress(args)
+    # With --json, stdout carries the one JSON object; everything else goes to stderr.
+    log = sys.stderr if args.json else sys.stdout
+    name, model = _resolve_model(
+        args, per_test_hint="diagnose fits shared parameters; give start values."
+    )
+    if args.report:
+        _require_folder_of(args.report, "--report")
+    tests, noise = _read_tests(args.data, _data_options(args), args.every, progress)
+    tolerance = _reversal_tolerance(args, noise)
+    print(f"read {len(tests)} file(s):", file=log)
+    print("\n".join(_describe_tests(tests, args.every)), file=log)
+    print(_tolerance_line(args, tolerance), file=log)
+    diagnosis = _run_diagnosis(
+        model, name, tests, args=args, tolerance=tolerance, progress=progress, log=log
+    )
+    if args.json:
+        print(diagnosis.to_json())
+    else:
+        print(file=log)
+        print(diagnosis.summary(), file=log)
+    if args.report:
+        out = pathlib.Path(args.report)
+        _make_folder(out, "--report")
+        written = write_diagnosis_report(
+            out, diagnosis, tests, reversal_tolerance=tolerance
+        )
+        print(
+            f"wrote the report to {out}{os.sep}: {', '.join(p.name for p in written)}",
+            file=log,
+        )
     return 0
 
 
@@ -949,6 +1016,50 @@ def _add_model_options(parser, params_help: str) -> None:
     parser.add_argument("--params", metavar="PARAMS.json", help=params_help)
 
 
+def _add_data_options(parser) -> None:
+    """The options that say how to read the data files (`fit`, `diagnose`)."""
+    raw = parser.add_argument_group("reading raw exports")
+    raw.add_argument(
+        "--columns",
+        metavar="NAMES",
+        help="the files' columns in order with their units, e.g. "
+        "time_s,elongation_mm,force_N (also time_ms, time_min, time_h, force_kN, "
+        "elongation_m, temperature_C; '-' for a column to ignore); default: from "
+        "the header",
+    )
+    raw.add_argument(
+        "--skip-rows",
+        type=_non_negative_int,
+        metavar="N",
+        help="lines before the first data row (default: detected)",
+    )
+    raw.add_argument(
+        "--length-mm",
+        type=_positive_float,
+        metavar="X",
+        help="free length of the cable, mm (replaces the files' length_mm)",
+    )
+    raw.add_argument(
+        "--diameter-mm",
+        type=_positive_float,
+        metavar="X",
+        help="diameter, mm (replaces the files' diameter_mm; default 3)",
+    )
+    raw.add_argument(
+        "--rate-mm-per-min",
+        type=_positive_float,
+        metavar="X",
+        help="crosshead speed, mm/min (replaces the files' rate_mm_per_min; default 3)",
+    )
+    raw.add_argument(
+        "--no-slack",
+        action="store_true",
+        help="do not detect slack stretches (by default, stretches where the force "
+        "is about zero while the elongation moves at the crosshead's speed are "
+        "masked and not fitted; a fast recovery at zero force can look like one)",
+    )
+
+
 def _add_tolerance_option(parser) -> None:
     parser.add_argument(
         "--reversal-tolerance-N",
@@ -956,7 +1067,7 @@ def _add_tolerance_option(parser) -> None:
         default=None,
         metavar="F",
         help="force changes smaller than F (N) keep the model on its loading or "
-        "unloading branch, so that force noise does not flip it (default: 3 x the "
+        "unloading branch, so that force noise does not flip it (default: 8 x the "
         "force noise, the robust standard deviation of the force's second "
         "differences: 0 for noise-free data)",
     )
@@ -1093,46 +1204,7 @@ def _parser() -> argparse.ArgumentParser:
         "panel per test; fit_residuals.png: residuals vs time) and tables "
         "(summary.md, rmse.csv) to this folder",
     )
-    raw = fit.add_argument_group("reading raw exports")
-    raw.add_argument(
-        "--columns",
-        metavar="NAMES",
-        help="the files' columns in order with their units, e.g. "
-        "time_s,elongation_mm,force_N (also time_ms, time_min, time_h, force_kN, "
-        "elongation_m, temperature_C; '-' for a column to ignore); default: from "
-        "the header",
-    )
-    raw.add_argument(
-        "--skip-rows",
-        type=_non_negative_int,
-        metavar="N",
-        help="lines before the first data row (default: detected)",
-    )
-    raw.add_argument(
-        "--length-mm",
-        type=_positive_float,
-        metavar="X",
-        help="free length of the cable, mm (replaces the files' length_mm)",
-    )
-    raw.add_argument(
-        "--diameter-mm",
-        type=_positive_float,
-        metavar="X",
-        help="diameter, mm (replaces the files' diameter_mm; default 3)",
-    )
-    raw.add_argument(
-        "--rate-mm-per-min",
-        type=_positive_float,
-        metavar="X",
-        help="crosshead speed, mm/min (replaces the files' rate_mm_per_min; default 3)",
-    )
-    raw.add_argument(
-        "--no-slack",
-        action="store_true",
-        help="do not detect slack stretches (by default, stretches where the force "
-        "is about zero while the elongation moves at the crosshead's speed are "
-        "masked and not fitted; a fast recovery at zero force can look like one)",
-    )
+    _add_data_options(fit)
     what = fit.add_argument_group("what to fit")
     what.add_argument(
         "--fit",
@@ -1147,6 +1219,78 @@ def _parser() -> argparse.ArgumentParser:
     )
     _add_solver_options(fit, starts=4)
     fit.set_defaults(run=_fit)
+
+    diag = commands.add_parser(
+        "diagnose",
+        help="find what the model gets wrong and name the physical cause",
+        description=(
+            "Fit the base model (default: the integrated model) to the measured "
+            "tests with the last part of every test held out, analyse its residuals "
+            "for structure (time under load, force, loading vs unloading, cycle, "
+            "rest time, length, rate, temperature, autocorrelation), fit every "
+            "candidate extension (hereditary, second_retardation, "
+            "stress_nonlinear_creep, temperature, termination_compliance, "
+            "bedding_in, sensor_drift), score each on the held-out data and by BIC, "
+            "and name the cause: the significant candidate of largest held-out gain, "
+            "or none. Reads files like 'jaxcable fit'. See jaxcable.diagnose."
+        ),
+    )
+    diag.add_argument("data", nargs="+", metavar="DATA.csv", help="the measured tests")
+    _add_model_options(
+        diag,
+        "start values of the base model: a PARAMS.json written by 'jaxcable fit', or "
+        "a JSON object of parameter name -> value (SI units)",
+    )
+    diag.add_argument(
+        "--json",
+        action="store_true",
+        help="print one JSON object on stdout (named_cause, candidates, "
+        "base_heldout_rmse_mm, extended_heldout_rmse_mm, ...); the log goes to stderr",
+    )
+    diag.add_argument(
+        "--report",
+        metavar="DIR",
+        help="write diagnosis.json, summary.md and plots before/after "
+        "(residuals.png, candidates.png, structure.png) to this folder",
+    )
+    _add_data_options(diag)
+    how = diag.add_argument_group("how to diagnose")
+    how.add_argument(
+        "--fit",
+        metavar="NAMES",
+        help="comma-separated base parameters to fit (default: for the integrated "
+        "model E1c,E1r,E2c,t_c,eta0,E2r,t_r1,E3r; else all)",
+    )
+    how.add_argument(
+        "--candidates",
+        metavar="IDS",
+        help="comma-separated extension ids to try (default: all seven)",
+    )
+    how.add_argument(
+        "--split",
+        choices=("time", "tests"),
+        default="time",
+        help="held-out data: 'time', the last --holdout of every test (default); "
+        "'tests', cross-validation over whole tests (--folds; one fit per fold "
+        "and candidate)",
+    )
+    how.add_argument(
+        "--folds",
+        type=_positive_int,
+        default=None,
+        metavar="K",
+        help="folds of --split tests (default: leave-one-test-out)",
+    )
+    how.add_argument(
+        "--holdout",
+        type=_positive_float,
+        default=0.3,
+        metavar="X",
+        help="held-out fraction of every test's samples for --split time "
+        "(default: 0.3)",
+    )
+    _add_solver_options(diag, starts=1)
+    diag.set_defaults(run=_diagnose)
 
     demo = commands.add_parser(
         "demo",

@@ -31,7 +31,8 @@ from jaxtyping import Array, Bool, Float, PRNGKeyArray, PyTree
 from . import _checks
 from ._abstract import AbstractCableModel
 from ._baselines import BoucWenModel, BurgersModel, HookeModel
-from ._cable import Cable
+from ._cable import ZERO_CELSIUS, Cable
+from ._extensions import EXTENSIONS
 from ._five_element import FiveElementModel
 from ._integrated import IntegratedModel
 from ._io import TestData
@@ -109,8 +110,47 @@ _PARAMETERS: dict[type, dict[str, _Info]] = {
     },
 }
 
-# Models `FitResult.from_json` can rebuild, by class name.
-_MODEL_CLASSES = {cls.__name__: cls for cls in _PARAMETERS}
+# Models `FitResult.from_json` can rebuild, by class name (extensions included).
+_MODEL_CLASSES = {cls.__name__: cls for cls in (*_PARAMETERS, *EXTENSIONS.values())}
+
+
+def _info(owner: AbstractCableModel, field: str, prefix: str) -> _Info | None:
+    """How a parameter of `owner` is fitted: the table above, else the model class's
+    `FIT_INFO` ({field: (transform, unit[, stiffness])}, as extensions declare it)."""
+    info = _PARAMETERS.get(type(owner), {}).get(field)
+    if info is None:
+        declared = getattr(type(owner), "FIT_INFO", {}).get(field)
+        if declared is None:
+            return None
+        info = _Info(*declared)
+    if info.transform.startswith("tanh:"):
+        # The bound is a sibling parameter: name it by its full path.
+        info = dataclasses.replace(
+            info, transform="tanh:" + prefix + info.transform[5:]
+        )
+    return info
+
+
+def _parameters(model: AbstractCableModel, prefix: str = "") -> dict[str, _Info | None]:
+    """{path: fit info} of every inexact-array field of `model`, in field order,
+    descending into wrapped models: a wrapper's own fields are named as they are, its
+    base's as `base.NAME` (`base.base.NAME`, ... for deeper nesting)."""
+    out = {}
+    for f in dataclasses.fields(model):
+        value = getattr(model, f.name)
+        if eqx.is_inexact_array(value):
+            out[prefix + f.name] = _info(model, f.name, prefix)
+        elif isinstance(value, AbstractCableModel):
+            out.update(_parameters(value, prefix + f.name + "."))
+    return out
+
+
+def _get(obj, path: str):
+    """`obj.a.b` for the path "a.b"."""
+    for part in path.split("."):
+        obj = getattr(obj, part)
+    return obj
+
 
 _DOMAIN_MESSAGE = (
     "a modulus, viscosity or time is not positive, or a constraint of the model "
@@ -211,6 +251,8 @@ class PaddedTests(eqx.Module):
     - `simulate`: False at padding samples (they leave the model's state unchanged).
     - `weight`: 1.0 where the sample enters the residual, 0.0 at padding and at
         samples the test's own mask excludes (e.g. slack).
+    - `temperature`: temperature at each sample, K (the test's temperature record,
+        else its `Cable.temperature`).
     - `cable`: a batched [`jaxcable.Cable`][], one per test.
     """
 
@@ -219,6 +261,7 @@ class PaddedTests(eqx.Module):
     elongation: Float[Array, "tests samples"]
     simulate: Bool[Array, "tests samples"]
     weight: Float[Array, "tests samples"]
+    temperature: Float[Array, "tests samples"]
     cable: Cable
 
     @property
@@ -327,7 +370,17 @@ def pad_tests(tests, *, multiple: int = 16) -> PaddedTests:
         _checks.require_below(
             f"{where}.force", force, cable.breaking_load, "breaking load"
         )
-        rows.append((time, force, np.where(mask, elongation, 0.0), mask))
+        temperature = getattr(test, "temperature", None)
+        if temperature is None:
+            temperature = np.full(time.shape, float(cable.temperature))
+        else:
+            temperature = np.asarray(temperature, float) + ZERO_CELSIUS
+            _checks.require_same_shape(
+                **{f"{where}.time": time, f"{where}.temperature": temperature}
+            )
+            _checks.require_finite(f"{where}.temperature", temperature)
+            _checks.require_positive(f"{where}.temperature (K)", temperature)
+        rows.append((time, force, np.where(mask, elongation, 0.0), mask, temperature))
         cables.append(cable)
     longest = max(r[0].shape[0] for r in rows)
     length = -(-longest // multiple) * multiple
@@ -341,6 +394,7 @@ def pad_tests(tests, *, multiple: int = 16) -> PaddedTests:
     elongation = np.stack([pad(r[2], 0.0) for r in rows])
     simulate = np.stack([pad(np.ones_like(r[3]), False) for r in rows])
     weight = np.stack([pad(r[3], False) for r in rows]).astype(float)
+    temperature = np.stack([pad(r[4]) for r in rows])
     # One transfer per field (not per test): host overhead counts in a fit of ~50 ms.
     cable = jax.tree_util.tree_map(
         lambda *xs: jnp.asarray(np.stack([np.asarray(x) for x in xs]), dtype), *cables
@@ -351,6 +405,7 @@ def pad_tests(tests, *, multiple: int = 16) -> PaddedTests:
         elongation=jnp.asarray(elongation, dtype),
         simulate=jnp.asarray(simulate),
         weight=jnp.asarray(weight, dtype),
+        temperature=jnp.asarray(temperature, dtype),
         cable=cable,
     )
 
@@ -360,7 +415,7 @@ def pad_tests(tests, *, multiple: int = 16) -> PaddedTests:
 
 
 def _elongation_history(
-    model, cable, time, force, mask, reversal_tolerance
+    model, cable, time, force, mask, temperature, reversal_tolerance
 ) -> tuple[Float[Array, " samples"], RESULTS]:
     """The elongation (m) of [`jaxcable.simulate_force_history`][] and its status.
 
@@ -368,17 +423,19 @@ def _elongation_history(
     cable at `time[0]`, masked samples leaving the state unchanged), keeping only the
     elongation: inside the solver's loop, XLA on CPU copies a scan's stacked outputs
     at every step, and a full `Trajectory` (every state field, times the Jacobian's
-    tangents) made each Jacobian about 20x slower than this.
+    tangents) made each Jacobian about 20x slower than this. The cable's temperature
+    is the sample's (K), for temperature-dependent models.
     """
 
     def body(carry: CableState, x):
-        t, f, m = x
-        new, _ = step(model, cable, carry, t, f, reversal_tolerance=reversal_tolerance)
+        t, f, m, temp = x
+        here = eqx.tree_at(lambda c: c.temperature, cable, temp)
+        new, _ = step(model, here, carry, t, f, reversal_tolerance=reversal_tolerance)
         new = jax.tree_util.tree_map(lambda a, b: jnp.where(m, a, b), new, carry)
         return new, new.strain
 
     final, strain = jax.lax.scan(
-        body, init_state(model, cable, time[0]), (time, force, mask)
+        body, init_state(model, cable, time[0]), (time, force, mask, temperature)
     )
     return strain * cable.length, final.result
 
@@ -419,15 +476,15 @@ def residuals(
         )
     in_axes = jax.tree_util.tree_map(lambda x: 0 if jnp.ndim(x) == 1 else None, params)
 
-    def one(p, cable, time, force, simulate, weight, measured):
+    def one(p, cable, time, force, simulate, weight, measured, temperature):
         model = eqx.combine(p, static)
         elongation, result = _elongation_history(
-            model, cable, time, force, simulate, reversal_tolerance
+            model, cable, time, force, simulate, temperature, reversal_tolerance
         )
         r = jnp.where(weight > 0, elongation - measured, 0.0)
         return jnp.where(result == RESULTS.successful, r, jnp.nan)
 
-    return jax.vmap(one, in_axes=(in_axes, 0, 0, 0, 0, 0, 0))(
+    return jax.vmap(one, in_axes=(in_axes, 0, 0, 0, 0, 0, 0, 0))(
         params,
         tests.cable,
         tests.time,
@@ -435,6 +492,7 @@ def residuals(
         tests.simulate,
         tests.weight,
         tests.elongation,
+        tests.temperature,
     )
 
 
@@ -462,7 +520,7 @@ class _Problem(eqx.Module):
             bound = None
             if transform.startswith("tanh:"):
                 other = transform.split(":", 1)[1]
-                bound = out[other] if other in out else getattr(self.base, other)
+                bound = out[other] if other in out else _get(self.base, other)
             out[name] = _to_natural(transform, split[name], self.scales[i], bound)
         return out
 
@@ -473,7 +531,7 @@ class _Problem(eqx.Module):
         values = self.natural(u)
         names = self.layout.names
         return eqx.tree_at(
-            lambda m: [getattr(m, n) for n in names],
+            lambda m: [_get(m, n) for n in names],
             self.base,
             [values[n] for n in names],
         )
@@ -504,13 +562,10 @@ def _layout_and_problem(model, tests, fit, per_test, transforms, reversal_tolera
         )
     data = pad_tests(tests)
     base, static = eqx.partition(model, eqx.is_inexact_array)
-    available = [
-        f.name
-        for f in dataclasses.fields(model)
-        if eqx.is_inexact_array(getattr(model, f.name))
-    ]
+    declared = _parameters(model)
+    available = list(declared)
     for name in available:
-        shape = jnp.shape(getattr(model, name))
+        shape = jnp.shape(_get(model, name))
         if shape != ():
             raise ValueError(
                 f"`model.{name}` has shape {shape}; fit a model with scalar "
@@ -546,7 +601,7 @@ def _layout_and_problem(model, tests, fit, per_test, transforms, reversal_tolera
         raise ValueError("`fit` is empty: name at least one parameter to fit.")
     names = tuple(n for n in available if n in chosen or n in per)
 
-    table = dict(_PARAMETERS.get(type(model), {}))
+    table = {k: v for k, v in declared.items() if v is not None}
     for name, transform in (transforms or {}).items():
         if name not in available:
             raise ValueError(
@@ -561,7 +616,7 @@ def _layout_and_problem(model, tests, fit, per_test, transforms, reversal_tolera
         table[name] = dataclasses.replace(old, transform=transform)
     infos = []
     for name in names:
-        value = float(getattr(model, name))
+        value = float(_get(model, name))
         info = table.get(name) or _Info("log" if value > 0 else "linear", "")
         if info.transform == "log" and not value > 0:
             raise ValueError(
@@ -591,11 +646,11 @@ def _layout_and_problem(model, tests, fit, per_test, transforms, reversal_tolera
     for i, (name, transform, size) in enumerate(
         zip(names, layout.transforms, layout.sizes)
     ):
-        value = float(getattr(model, name))
+        value = float(_get(model, name))
         scales[i] = abs(value) if value != 0 else 1.0
         bound = None
         if transform.startswith("tanh:"):
-            bound = float(getattr(model, transform.split(":", 1)[1]))
+            bound = float(_get(model, transform.split(":", 1)[1]))
         start += [_to_unconstrained(transform, value, scales[i], bound)] * size
     problem = _Problem(
         layout=layout,
@@ -877,6 +932,33 @@ _MIN_SINGULAR_RATIO = 1e-6
 _ROUNDING = 1e-13
 
 
+def _model_document(model: AbstractCableModel) -> dict[str, Any]:
+    """{"model": class name, "parameters", "static"[, "base": the wrapped model's]}."""
+    parameters = {}
+    static = {}
+    document: dict[str, Any] = {"model": type(model).__name__}
+    for field in dataclasses.fields(model):
+        value = getattr(model, field.name)
+        if eqx.is_inexact_array(value):
+            v = np.asarray(value, float)
+            parameters[field.name] = float(v) if v.ndim == 0 else [float(x) for x in v]
+        elif isinstance(value, AbstractCableModel):
+            document[field.name] = _model_document(value)
+        elif isinstance(value, (bool, int, float, str)):
+            static[field.name] = value
+    return {**document, "parameters": parameters, "static": static}
+
+
+def _model_from_document(doc: Mapping[str, Any]) -> AbstractCableModel:
+    """The inverse of `_model_document` (the class names are checked by the caller)."""
+    fields: dict[str, Any] = {
+        k: np.asarray(v, float) for k, v in doc["parameters"].items()
+    }
+    if "base" in doc:
+        fields["base"] = _model_from_document(doc["base"])
+    return _MODEL_CLASSES[doc["model"]](**fields, **doc.get("static", {}))
+
+
 def _json_number(x: float) -> float | None:
     return float(x) if math.isfinite(x) else None
 
@@ -1015,26 +1097,12 @@ class FitResult:
 
         The JSON text.
         """
-        model = self.model
-        parameters = {}
-        static = {}
-        for field in dataclasses.fields(model):
-            value = getattr(model, field.name)
-            if eqx.is_inexact_array(value):
-                v = np.asarray(value, float)
-                parameters[field.name] = (
-                    float(v) if v.ndim == 0 else [float(x) for x in v]
-                )
-            elif isinstance(value, (bool, int, float, str)):
-                static[field.name] = value
         document = {
             "format": "jaxcable-params",
             "format_version": 1,
             "jaxcable_version": importlib.metadata.version("jaxcable"),
-            "model": type(model).__name__,
+            **_model_document(self.model),
             "units": "SI (N, m, s, Pa, Pa s)",
-            "parameters": parameters,
-            "static": static,
             "per_test": list(self.per_test),
             "fitted": [
                 {
@@ -1110,15 +1178,16 @@ class FitResult:
                 f"`source` {where}: not a jaxcable PARAMS.json (no "
                 "'format': 'jaxcable-params')."
             )
-        model_cls = _MODEL_CLASSES.get(doc.get("model"))
-        if model_cls is None:
-            raise ValueError(
-                f"`source` {where}: unknown model {doc.get('model')!r}; known: "
-                f"{sorted(_MODEL_CLASSES)}."
-            )
+        sub = doc
+        while isinstance(sub, dict):
+            if sub.get("model") not in _MODEL_CLASSES:
+                raise ValueError(
+                    f"`source` {where}: unknown model {sub.get('model')!r}; known: "
+                    f"{sorted(_MODEL_CLASSES)}."
+                )
+            sub = sub.get("base")
         try:
-            fields = {k: np.asarray(v, float) for k, v in doc["parameters"].items()}
-            model = model_cls(**fields, **doc.get("static", {}))
+            model = _model_from_document(doc)
             fitted = doc["fitted"]
             tests = doc["tests"]
             num_tests = len(tests)

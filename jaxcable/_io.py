@@ -30,7 +30,7 @@ from typing import NamedTuple
 import numpy as np
 
 from . import _slack
-from ._cable import Cable
+from ._cable import ZERO_CELSIUS, Cable
 from ._slack import SlackReport as SlackReport, SlackStretch as SlackStretch
 
 
@@ -194,7 +194,9 @@ class TestData:
         """The [`jaxcable.Cable`][] described by the metadata, in SI.
 
         `length_mm` is required; `diameter_mm` defaults to 3 mm and `rate_mm_per_min`
-        (the crosshead speed) to 3 mm/min, Park's Dyneema SK78 test.
+        (the crosshead speed) to 3 mm/min, Park's Dyneema SK78 test. The temperature
+        is the metadata's `temperature_C`, else the mean of the temperature column,
+        else the `Cable` default (20 °C).
 
         **Returns:**
 
@@ -208,8 +210,16 @@ class TestData:
         length_mm = float(self.metadata["length_mm"])
         diameter_mm = float(self.metadata.get("diameter_mm", DEFAULT_DIAMETER_MM))
         rate = float(self.metadata.get("rate_mm_per_min", DEFAULT_RATE_MM_PER_MIN))
+        kwargs = {}
+        if "temperature_C" in self.metadata:
+            kwargs["temperature"] = float(self.metadata["temperature_C"]) + ZERO_CELSIUS
+        elif self.temperature is not None:
+            kwargs["temperature"] = float(np.mean(self.temperature)) + ZERO_CELSIUS
         return Cable(
-            length=length_mm * 1e-3, diameter=diameter_mm * 1e-3, speed=rate * 1e-3 / 60
+            length=length_mm * 1e-3,
+            diameter=diameter_mm * 1e-3,
+            speed=rate * 1e-3 / 60,
+            **kwargs,
         )
 
     def locate(self, index: int, column: str | None = None) -> str:

@@ -19,7 +19,7 @@ from jaxtyping import Array, ArrayLike, Bool, Float, Int, PRNGKeyArray
 
 from . import _checks
 from ._abstract import AbstractCableModel
-from ._cable import Cable
+from ._cable import CABLE_FIELDS, Cable
 from ._protocol import Protocol
 from ._results import RESULTS
 from ._simulate import _check_history, simulate_force_history, simulate_rate_test
@@ -777,7 +777,7 @@ def _check_cables(cables) -> Cable:
             f"`cables` must be a jaxcable.Cable (fields of shape (cables,)), got "
             f"{type(cables).__name__}."
         )
-    names = ("length", "diameter", "speed", "breaking_load")
+    names = CABLE_FIELDS
     shapes = {n: jnp.shape(getattr(cables, n)) for n in names}
     if any(len(s) > 1 for s in shapes.values()):
         raise ValueError(

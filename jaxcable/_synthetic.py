@@ -38,6 +38,7 @@ def synthesize(
     seed: int,
     elongation_noise: float = 5e-6,
     force_noise: float = 0.05,
+    force_deadband: float | None = None,
     temperature_C: float = 21.0,
     temperature_swing_C: float = 0.4,
     metadata: dict | None = None,
@@ -50,6 +51,12 @@ def synthesize(
     - `seed`: seed of the noise (NumPy `default_rng`).
     - `elongation_noise`: standard deviation of the extensometer noise, m (5 um).
     - `force_noise`: standard deviation of the load-cell noise, N; forces stay >= 0.
+    - `force_deadband`: readings below this are reported as 0 N, the zero suppression
+        of a tester's load cell (default: 3 `force_noise`). Without it a resting
+        cable would read the positive half of the noise (about 0.4 sigma on
+        average), and a model driven by the readings would creep under it over a
+        long rest: 0.02 N for 24 h adds about 0.15 mm to 300 mm of SK78 through
+        Park's dashpot.
     - `temperature_C`, `temperature_swing_C`: lab temperature, a daily sinusoid of this
         amplitude around this mean plus 0.05 C of sensor noise, °C (recorded only).
     - `metadata`: extra `# key: value` metadata.
@@ -65,6 +72,8 @@ def synthesize(
     force = np.clip(
         np.asarray(traj.force) + force_noise * rng.standard_normal(n), 0, None
     )
+    deadband = 3.0 * force_noise if force_deadband is None else force_deadband
+    force = np.where(force < deadband, 0.0, force)
     elongation = np.asarray(traj.elongation) + elongation_noise * rng.standard_normal(n)
     temperature = (
         temperature_C
@@ -137,4 +146,146 @@ def bundled_dataset(seed: int = 20261121) -> list[TestData]:
                     )
                 )
                 index += 1
+    return tests
+
+
+# ----------------------------------------------------------------------------------
+# Data sets with one hidden effect (issue 4): the diagnosis must name it.
+
+# Six tests, a balanced design: each length, rate, force level and temperature
+# appears twice (rates three times) and no two factors move together, so that the
+# effects that depend on them (termination compliance on 1/L0, stress-nonlinear creep
+# on force, temperature on T) are not confounded with one another.
+# (length mm, crosshead speed mm/min, force N, temperature °C)
+HIDDEN_EFFECT_DESIGN = (
+    (100.0, 3.0, 120.0, 10.0),
+    (200.0, 30.0, 160.0, 23.0),
+    (300.0, 3.0, 80.0, 36.0),
+    (100.0, 30.0, 80.0, 23.0),
+    (200.0, 3.0, 160.0, 36.0),
+    (300.0, 30.0, 120.0, 10.0),
+)
+
+# The base parameters the generator perturbs (and the diagnosis refits): those of
+# `jaxcable._diagnose.DEFAULT_FIT`.
+_PERTURBED = ("E1c", "E1r", "E2c", "t_c", "eta0", "E2r", "t_r1", "E3r")
+
+# Each effect's size, in its extension's SIZE_FIELD unit, at which the diagnosis is
+# tested (the detection limits measured by `benchmarks/diagnose_matrix.py` are in
+# docs/diagnosis.md), and the fixed values of its other parameters.
+HIDDEN_EFFECTS: dict[str, dict] = {
+    "hereditary": {"size": 1.0, "fixed": {}},
+    "second_retardation": {"size": 2e9, "fixed": {"tau_k": 1800.0}},
+    "stress_nonlinear_creep": {"size": 1.0, "fixed": {}},
+    "temperature": {"size": 4e4, "fixed": {}},
+    "termination_compliance": {"size": 1e-6, "fixed": {}},
+    "bedding_in": {"size": 2e-3, "fixed": {"F_b": 60.0}},
+    "sensor_drift": {"size": 2e-9, "fixed": {}},
+}
+
+
+def hidden_effect_protocol(force_max: float) -> Protocol:
+    """The protocol of every test of a hidden-effect data set (about 230 samples):
+    two load-unload cycles to `force_max` (N), a 1 h creep hold, unloading and a 2 h
+    rest; then the same loading, hold, unloading and rest once more. The repeat is
+    the last ~30 % of the samples, so a blocked time split (`diagnose`'s default
+    `holdout=0.3`) holds out a forecast of phases the fit has seen: creep under
+    load, recovery at rest."""
+    block = Protocol.concatenate(
+        Protocol.ramp(0.0, force_max, 20),
+        Protocol.hold(force_max, 600.0, 8),
+        Protocol.hold(force_max, 3000.0, 8),
+        Protocol.ramp(force_max, 0.0, 20),
+        Protocol.rest(600.0, 8),
+        Protocol.rest(6600.0, 10),
+    )
+    return Protocol.concatenate(Protocol.cycles(force_max, 2, 20), block, block)
+
+
+def hidden_effect_model(
+    effect: str | None,
+    *,
+    seed: int,
+    size: float | None = None,
+    spread: float = 0.1,
+) -> AbstractCableModel:
+    """The true model of a hidden-effect data set: the default
+    [`jaxcable.IntegratedModel`][] with its eight fitted parameters perturbed
+    (log-normal, standard deviation `spread`, from `seed`), wrapped in the extension
+    `effect` of the given `size` (its `SIZE_FIELD`; default `HIDDEN_EFFECTS`), or
+    unwrapped for `effect=None`."""
+    import equinox as eqx
+
+    from ._extensions import EXTENSIONS
+    from ._integrated import IntegratedModel
+
+    if effect is not None and effect not in EXTENSIONS:
+        raise ValueError(
+            f"`effect` must be None or one of {list(EXTENSIONS)}, got {effect!r}."
+        )
+    rng = np.random.default_rng(seed)
+    base = IntegratedModel()
+    factors = np.exp(spread * rng.standard_normal(len(_PERTURBED)))
+    base = eqx.tree_at(
+        lambda m: [getattr(m, n) for n in _PERTURBED],
+        base,
+        [getattr(base, n) * f for n, f in zip(_PERTURBED, factors)],
+    )
+    if effect is None:
+        return base
+    cls = EXTENSIONS[effect]
+    spec = HIDDEN_EFFECTS[effect]
+    value = spec["size"] if size is None else size
+    return cls(base, **{cls.SIZE_FIELD: value, **spec["fixed"]})
+
+
+def hidden_effect_dataset(
+    effect: str | None,
+    *,
+    seed: int,
+    size: float | None = None,
+    elongation_noise: float = 5e-6,
+    force_noise: float = 0.05,
+) -> list[TestData]:
+    """Tests from the base model plus exactly one hidden effect, with realistic noise.
+
+    Six tests of `HIDDEN_EFFECT_DESIGN` (three lengths, two rates, three force levels,
+    three temperatures) on the protocol of `hidden_effect_protocol`, simulated by
+    `hidden_effect_model(effect, seed=seed, size=size)`; each test's noise is drawn
+    from `seed` too.
+
+    **Arguments:**
+
+    - `effect`: an extension id of [`jaxcable.EXTENSIONS`][], or None (no effect).
+    - `seed`: the seed of the base parameters and of the noise.
+    - `size`: the effect's size in its extension's `SIZE_FIELD` unit (default:
+        `HIDDEN_EFFECTS[effect]["size"]`).
+    - `elongation_noise`, `force_noise`: standard deviations, m and N.
+
+    **Returns:**
+
+    Six [`jaxcable.TestData`][] with time, force, elongation and temperature.
+    """
+    model = hidden_effect_model(effect, seed=seed, size=size)
+    tests = []
+    for i, (length, rate, force, temp) in enumerate(HIDDEN_EFFECT_DESIGN):
+        cable = Cable(
+            length=length * 1e-3, speed=rate * 1e-3 / 60, temperature=temp + 273.15
+        )
+        tests.append(
+            synthesize(
+                model,
+                cable,
+                hidden_effect_protocol(force),
+                seed=seed * 1000 + i,
+                elongation_noise=elongation_noise,
+                force_noise=force_noise,
+                temperature_C=temp,
+                temperature_swing_C=0.0,
+                metadata={
+                    "id": f"L{length:.0f}-v{rate:.0f}-F{force:.0f}-T{temp:.0f}",
+                    "hidden_effect": effect or "none",
+                },
+            )
+        )
     return tests

@@ -1,0 +1,190 @@
+"""The diagnosis workflow (issue 4): residual structure, held-out scoring, the named
+cause, the command line; and the hidden-effect tests (one seed per effect here; the
+10-seed confusion matrix is `benchmarks/diagnose_matrix.py`, results in
+docs/diagnosis.md)."""
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+
+import jaxcable as jc
+from jaxcable import _synthetic
+from jaxcable._cli import main
+from jaxcable._diagnose import noise_level, residual_structure
+
+
+@pytest.fixture(scope="module")
+def clean_tests():
+    return _synthetic.hidden_effect_dataset(None, seed=3)
+
+
+# ----------------------------------------------------------------------------------
+# Bad inputs
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"candidates": ["creep_rupture"]}, "candidates"),
+        ({"split": "random"}, "split"),
+        ({"holdout": 0.0}, "holdout"),
+        ({"holdout": 0.95}, "holdout"),
+        ({"model": "integrated"}, "model"),
+    ],
+)
+def test_bad_arguments_name_the_argument(clean_tests, kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        jc.diagnose(clean_tests, **kwargs)
+
+
+def test_leave_one_out_needs_two_tests(clean_tests):
+    with pytest.raises(ValueError, match="split"):
+        jc.diagnose(clean_tests[:1], split="tests")
+
+
+def test_test_without_elongation_is_rejected(clean_tests):
+    bad = dataclasses.replace(clean_tests[0], elongation=None)
+    with pytest.raises(ValueError, match=r"tests\[0\]"):
+        jc.diagnose([bad, *clean_tests[1:]])
+
+
+def test_no_tests_is_rejected():
+    with pytest.raises(ValueError, match="tests"):
+        jc.diagnose([])
+
+
+# ----------------------------------------------------------------------------------
+# Building blocks
+
+
+def test_noise_level_recovers_white_noise():
+    rng = np.random.default_rng(0)
+    t = np.linspace(0, 100, 4000)
+    smooth = 1e-3 * np.sin(t / 7) + 2e-5 * t
+    test = jc.TestData(
+        time=t,
+        force=np.ones_like(t),
+        elongation=smooth + 5e-6 * rng.standard_normal(t.size),
+        metadata={"length_mm": 100.0},
+    )
+    assert noise_level([test]) == pytest.approx(5e-6, rel=0.1)
+
+
+def test_residual_structure_finds_the_driving_condition(clean_tests):
+    rng = np.random.default_rng(1)
+    # A residual proportional to force, plus white noise: "force" is the strongest
+    # condition and the residual is autocorrelated (force is smooth in time).
+    residual = [
+        2e-6 * t.force + 1e-6 * rng.standard_normal(t.force.size) for t in clean_tests
+    ]
+    s = residual_structure(clean_tests, residual)
+    assert s["strongest"] == "force"
+    assert s["correlation"]["force"] > 0.9
+    assert s["autocorrelation"] > s["white_noise_band"]
+    # White noise alone: no condition explains it, no autocorrelation.
+    noise = [1e-6 * rng.standard_normal(t.force.size) for t in clean_tests]
+    s = residual_structure(clean_tests, noise)
+    assert max(abs(v) for v in s["correlation"].values() if v is not None) < 0.15
+    assert abs(s["autocorrelation"]) < 3 * s["white_noise_band"]
+
+
+def test_temperature_candidate_is_not_applicable_at_one_temperature(clean_tests):
+    one = [
+        dataclasses.replace(
+            t, temperature=np.full(t.num_samples, 21.0), metadata=dict(t.metadata)
+        )
+        for t in clean_tests
+    ]
+    for t in one:
+        t.metadata["temperature_C"] = 21.0
+    d = jc.diagnose(one, candidates=["temperature"])
+    c = d.candidate("temperature")
+    assert not c.applicable and "K" in c.note
+    assert d.named_cause == "none"
+
+
+def test_generator_hides_exactly_one_effect():
+    true = _synthetic.hidden_effect_model("sensor_drift", seed=0)
+    assert isinstance(true, jc.SensorDrift)
+    assert isinstance(true.base, jc.IntegratedModel)
+    with pytest.raises(ValueError, match="effect"):
+        _synthetic.hidden_effect_model("creep_rupture", seed=0)
+
+
+# ----------------------------------------------------------------------------------
+# The hidden-effect tests: a representative set, one seed per effect.
+
+EFFECTS = [None, *jc.EXTENSIONS]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("effect", EFFECTS, ids=lambda e: e or "none")
+def test_hidden_effect_is_named(effect):
+    seed = 11
+    tests = _synthetic.hidden_effect_dataset(effect, seed=seed)
+    d = jc.diagnose(tests)
+    assert d.named_cause == (effect or "none"), d.summary()
+    noise_mm = 5e-3  # the generator's elongation noise
+    # The named model predicts the held-out data to within 20 % of the noise (the
+    # force noise adds a little elongation noise of its own).
+    assert d.extended_heldout_rmse_mm <= 1.2 * noise_mm, d.summary()
+    if effect is not None:
+        c = d.candidate(effect)
+        assert c.significant and c.gain_pct > 0
+        assert d.effect["parameter"] == jc.EXTENSIONS[effect].SIZE_FIELD
+        assert np.isfinite(d.effect["stderr"]) and d.effect["stderr"] > 0
+
+
+# ----------------------------------------------------------------------------------
+# Command line
+
+
+@pytest.mark.slow
+def test_cli_diagnose_json_and_report(tmp_path, capsys):
+    tests = _synthetic.hidden_effect_dataset("termination_compliance", seed=5)
+    files = []
+    for i, t in enumerate(tests[:4]):
+        path = tmp_path / f"t{i}.csv"
+        jc.write_csv(path, t)
+        files.append(str(path))
+    report = tmp_path / "report"
+    status = main(
+        [
+            "diagnose",
+            *files,
+            "--json",
+            "--candidates",
+            "termination_compliance,sensor_drift",
+            "--report",
+            str(report),
+        ]
+    )
+    out = capsys.readouterr().out
+    assert status == 0
+    doc = json.loads(out)  # stdout is exactly one JSON object
+    assert doc["named_cause"] == "termination_compliance"
+    for key in ("base_heldout_rmse_mm", "extended_heldout_rmse_mm", "candidates"):
+        assert key in doc
+    ids = [c["id"] for c in doc["candidates"]]
+    assert ids == ["termination_compliance", "sensor_drift"]
+    for c in doc["candidates"]:
+        assert {"id", "heldout_rmse_mm", "gain_pct"} <= set(c)
+    for name in (
+        "diagnosis.json",
+        "summary.md",
+        "residuals.png",
+        "candidates.png",
+        "structure.png",
+    ):
+        assert (report / name).stat().st_size > 0
+
+
+def test_cli_diagnose_bad_candidate_exits_2(tmp_path, capsys):
+    path = tmp_path / "t.csv"
+    jc.write_csv(path, _synthetic.hidden_effect_dataset(None, seed=1)[0])
+    status = main(["diagnose", str(path), "--candidates", "creep_rupture"])
+    err = capsys.readouterr().err
+    assert status == 2
+    assert "candidates" in err and len(err.strip().splitlines()) == 1
