@@ -3,12 +3,15 @@
 For each hidden effect (and for none), `--seeds` data sets of
 `jaxcable.hidden_effect_dataset` (six tests: three lengths, two rates, three force
 levels, three temperatures; 5 um elongation and 0.05 N force noise; the base
-parameters perturbed by 10 % per seed) are diagnosed; the named causes make the
-confusion matrix. With `--factors`, each effect is also run at its documented size
-times each factor, and the detection limit is the smallest size named in >= 9 of 10
-seeds. Prints JSON (one object) and a table; `--out FILE` writes the JSON too.
+parameters perturbed by 10 % per seed) are diagnosed at the effect's documented size;
+the named causes make the confusion matrix. With `--sweep`, each effect is also run at
+its weaker sizes (`HIDDEN_EFFECTS[effect]["weaker"]`), and its detection limit is the
+weakest size named in >= 9 of 10 seeds. For every run the held-out RMSE of the named
+model is compared with the floor: the held-out RMSE of the data-generating model
+itself (elongation noise plus its response to the force noise). Prints JSON (one
+object) and a table; `--out FILE` writes the JSON too.
 
-    python benchmarks/diagnose_matrix.py --seeds 10 --factors 0.25,0.5,1 --out m.json
+    python benchmarks/diagnose_matrix.py --seeds 10 --sweep --out matrix.json
 """
 
 import argparse
@@ -23,19 +26,21 @@ import jax
 jax.config.update("jax_enable_x64", True)
 
 import jaxcable as jc
+from jaxcable._diagnose import heldout_rmse
 from jaxcable._synthetic import HIDDEN_EFFECTS
 
 
-def run(effect, seed, factor):
-    size = None if effect is None else HIDDEN_EFFECTS[effect]["size"] * factor
+def run(effect, seed, size):
     tests = jc.hidden_effect_dataset(effect, seed=seed, size=size)
+    floor = heldout_rmse(jc.hidden_effect_model(effect, seed=seed, size=size), tests)
     d = jc.diagnose(tests)
     return {
         "effect": effect or "none",
         "seed": seed,
         "size": size,
-        "factor": factor,
+        "documented": effect is None or size == HIDDEN_EFFECTS[effect]["size"],
         "named": d.named_cause,
+        "floor_um": 1e3 * floor,
         "base_heldout_um": 1e3 * d.base_heldout_rmse_mm,
         "extended_heldout_um": 1e3 * d.extended_heldout_rmse_mm,
         "gains": {c.id: c.gain_pct for c in d.candidates},
@@ -50,23 +55,30 @@ def main(argv=None):
     parser.add_argument("--first-seed", type=int, default=100)
     parser.add_argument("--effects", default="none," + ",".join(jc.EXTENSIONS))
     parser.add_argument(
-        "--factors", default="1", help="size factors for the detection limits"
+        "--sweep", action="store_true", help="also run the weaker sizes"
     )
     parser.add_argument("--out", default=None)
+    parser.add_argument(
+        "--markdown", default=None, help="also write the tables as markdown here"
+    )
     args = parser.parse_args(argv)
     effects = [None if e == "none" else e for e in args.effects.split(",")]
-    factors = [float(f) for f in args.factors.split(",")]
     seeds = range(args.first_seed, args.first_seed + args.seeds)
     rows = []
     start = time.perf_counter()
     for effect in effects:
-        for factor in [1.0] if effect is None else factors:
+        sizes = [None]
+        if effect is not None:
+            spec = HIDDEN_EFFECTS[effect]
+            sizes = [spec["size"], *(spec["weaker"] if args.sweep else ())]
+        for size in sizes:
             for seed in seeds:
-                row = run(effect, seed, factor)
+                row = run(effect, seed, size)
                 rows.append(row)
                 print(
-                    f"{row['effect']:24s} x{factor:<5g} seed {seed}: named "
+                    f"{row['effect']:24s} {size or 0:<9.3g} seed {seed}: named "
                     f"{row['named']:24s} held-out {row['extended_heldout_um']:.2f} um "
+                    f"(floor {row['floor_um']:.2f}) "
                     f"({time.perf_counter() - start:.0f} s)",
                     file=sys.stderr,
                     flush=True,
@@ -77,32 +89,44 @@ def main(argv=None):
         for e in (["none"] if None in effects else []) + [e for e in effects if e]
     }
     for row in rows:
-        if row["factor"] == 1.0:
+        if row["documented"]:
             matrix[row["effect"]][row["named"]] += 1
     limits = {}
-    for effect in [e for e in effects if e]:
-        ok = []
-        for factor in factors:
-            sel = [r for r in rows if r["effect"] == effect and r["factor"] == factor]
-            hits = sum(r["named"] == effect for r in sel)
-            near = sum(r["extended_heldout_um"] <= 6.0 for r in sel)
-            ok.append((factor, hits, near, len(sel)))
-        detected = [f for f, h, _, n in ok if h >= 0.9 * n]
+    for effect in [None, *[e for e in effects if e]]:
+        if effect is None and None not in effects:
+            continue
+        runs = []
+        for size in dict.fromkeys(
+            r["size"] for r in rows if r["effect"] == (effect or "none")
+        ):
+            sel = [
+                r
+                for r in rows
+                if r["effect"] == (effect or "none") and r["size"] == size
+            ]
+            runs.append(
+                {
+                    "size": size,
+                    "named": sum(r["named"] == (effect or "none") for r in sel),
+                    "within_20pct_of_floor": sum(
+                        r["extended_heldout_um"] <= 1.2 * r["floor_um"] for r in sel
+                    ),
+                    "within_20pct_of_noise": sum(
+                        r["extended_heldout_um"] <= 1.2 * 5.0 for r in sel
+                    ),
+                    "seeds": len(sel),
+                }
+            )
+        if effect is None:
+            limits["none"] = {"runs": runs}
+            continue
+        detected = [r["size"] for r in runs if r["named"] >= 0.9 * r["seeds"]]
+        # The weakest detected size: sizes run from strong to weak.
         limits[effect] = {
             "unit": jc.EXTENSIONS[effect].SIZE_UNIT,
             "parameter": jc.EXTENSIONS[effect].SIZE_FIELD,
-            "runs": [
-                {
-                    "size": HIDDEN_EFFECTS[effect]["size"] * f,
-                    "named": h,
-                    "within_20pct_of_noise": w,
-                    "seeds": n,
-                }
-                for f, h, w, n in ok
-            ],
-            "detection_limit": (
-                HIDDEN_EFFECTS[effect]["size"] * min(detected) if detected else None
-            ),
+            "runs": runs,
+            "detection_limit": detected[-1] if detected else None,
         }
     document = {
         "benchmark": "diagnose_matrix",
@@ -124,6 +148,9 @@ def main(argv=None):
     if args.out:
         with open(args.out, "w") as f:
             f.write(text + "\n")
+    if args.markdown:
+        with open(args.markdown, "w") as f:
+            f.write(_markdown(matrix, limits, names, document))
     short = {"none": "none", **{k: k[:8] for k in jc.EXTENSIONS}}
     print("\nhidden \\ named  " + " ".join(f"{short[n]:>8s}" for n in names))
     for effect, counts in matrix.items():
@@ -132,9 +159,47 @@ def main(argv=None):
         )
     for effect, info in limits.items():
         runs = ", ".join(
-            f"{r['size']:.3g}: {r['named']}/{r['seeds']}" for r in info["runs"]
+            f"{r['size'] or 0:.3g}: named {r['named']}/{r['seeds']}, within 20 % of "
+            f"the floor {r['within_20pct_of_floor']}/{r['seeds']}, of 5 um "
+            f"{r['within_20pct_of_noise']}/{r['seeds']}"
+            for r in info["runs"]
         )
-        print(f"{effect:24s} {info['parameter']} [{info['unit']}]: {runs}")
+        print(
+            f"{effect:24s} {info.get('parameter', '')} [{info.get('unit', '')}]: {runs}"
+        )
+
+
+def _markdown(matrix, limits, names, document) -> str:
+    lines = [
+        "| hidden \\ named | " + " | ".join(f"`{n}`" for n in names) + " |",
+        "| --- | " + " | ".join("---:" for _ in names) + " |",
+    ]
+    for effect, counts in matrix.items():
+        lines.append(
+            f"| `{effect}` | " + " | ".join(str(counts[n]) for n in names) + " |"
+        )
+    lines += [
+        "",
+        "| hidden effect | size parameter | size | named | held-out RMSE within 20 % "
+        "of the floor | within 20 % of 5 um |",
+        "| --- | --- | ---: | ---: | ---: | ---: |",
+    ]
+    for effect, info in limits.items():
+        for r in info["runs"]:
+            size = "-" if r["size"] is None else f"{r['size']:.3g} {info['unit']}"
+            lines.append(
+                f"| `{effect}` | {info.get('parameter', '-')} | {size} | "
+                f"{r['named']}/{r['seeds']} | {r['within_20pct_of_floor']}/{r['seeds']}"
+                f" | {r['within_20pct_of_noise']}/{r['seeds']} |"
+            )
+    lines += [
+        "",
+        f"Seeds {document['seeds'][0]}-{document['seeds'][-1]}; "
+        f"{document['seconds']:.0f} s on {document['machine']['platform']} "
+        f"({document['machine']['devices']}).",
+        "",
+    ]
+    return "\n".join(lines)
 
 
 if __name__ == "__main__":

@@ -174,12 +174,7 @@ def main():
 
         return jax.vmap(per_draw)(models)
 
-    cables_b = jc.Cable(
-        length=jnp.broadcast_to(cables.length, (n_c,)),
-        speed=jnp.broadcast_to(cables.speed, (n_c,)),
-        diameter=jnp.full(n_c, 3e-3),
-        breaking_load=jnp.full(n_c, 2000.0),
-    )
+    cables_b = jax.tree_util.tree_map(lambda x: jnp.broadcast_to(x, (n_c,)), cables)
     t0 = time.perf_counter()
     compiled = hand.lower(keys).compile()
     compile_hand = time.perf_counter() - t0

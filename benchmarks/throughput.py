@@ -99,13 +99,13 @@ def main():
         return jc.Protocol.cycles(100.0, cycles, samples_per_ramp=per_ramp, start=False)
 
     def cables(batch):
-        # Lengths 100-500 mm at 3-10 mm/min: the paper's range of strain rates.
-        return jc.Cable(
+        # Lengths 100-500 mm at 3-10 mm/min: the paper's range of strain rates. The
+        # other fields keep their defaults, broadcast to the batch (whatever they are).
+        cable = jc.Cable(
             length=jnp.linspace(0.1, 0.5, batch),
             speed=jnp.linspace(3e-3, 10e-3, batch) / 60,
-            diameter=jnp.full(batch, 3e-3),
-            breaking_load=jnp.full(batch, 2000.0),
         )
+        return jax.tree_util.tree_map(lambda x: jnp.broadcast_to(x, (batch,)), cable)
 
     def forward(model, cable, protocol):
         traj = jax.vmap(

@@ -82,3 +82,41 @@ def require_below(name: str, value, limit, limit_name: str) -> None:
             f"`{name}` exceeds the cable's {limit_name} ({lim:g} N): element {idx} is "
             f"{v.ravel()[idx]:g} N."
         )
+
+
+def check_parameters(
+    model_name: str,
+    model,
+    names,
+    *,
+    positive: bool = True,
+    allow_zero: bool = False,
+    reason: str = "",
+) -> None:
+    """Raise `ValueError` naming the first concrete parameter field that is not finite
+    (and, with `positive`, not > 0, or not >= 0 with `allow_zero`).
+
+    The one construction-time check of every model's parameters. Traced fields (a
+    model built inside `jit`, `vmap` or `grad`) are skipped: the model's traced
+    `check` flags them with `RESULTS.parameter_out_of_domain` instead.
+
+    **Arguments:**
+
+    - `model_name`: the class name, for the message (`IntegratedModel.E1c`).
+    - `model`: the model (any object with the fields as attributes).
+    - `names`: the field names to check.
+    - `positive`, `allow_zero`: the sign required besides finiteness.
+    - `reason`: appended to the message (why the domain is what it is).
+    """
+    for name in names:
+        value = getattr(model, name)
+        if not is_concrete(value):
+            continue
+        label = f"{model_name}.{name}"
+        try:
+            if positive:
+                require_positive(label, value, allow_zero=allow_zero)
+            else:
+                require_finite(label, value)
+        except (TypeError, ValueError) as e:
+            raise ValueError(f"{e} {reason}".rstrip()) from None

@@ -923,7 +923,47 @@ def _demo_fit(args, out: pathlib.Path, files: list, source: str, progress: bool)
             "physical effect the model lacks (scripts/make_bundled_data.py), so the "
             "fit is imperfect by design: the residuals show what is missing."
         )
-    return failure, [params, *written]
+    return failure, [params, *written], tests, tolerance
+
+
+def _demo_diagnose(args, out: pathlib.Path, tests, tolerance: float, progress: bool):
+    """Step 3 of the demo: `jaxcable diagnose` on the same tests, report in
+    `out/diagnosis/`."""
+    import jaxcable
+
+    from ._diagnose import write_diagnosis_report
+
+    print()
+    print(
+        "3. What the fit gets wrong: jaxcable diagnose (every candidate extension "
+        "fitted, scored on the last 30 % of every test, held out)."
+    )
+    diagnosis = _run_diagnosis(
+        jaxcable.IntegratedModel(),
+        "integrated",
+        tests,
+        args=argparse.Namespace(
+            fit=args.fit,
+            candidates=None,
+            split="time",
+            holdout=0.3,
+            folds=None,
+            starts=1,
+            max_steps=args.max_steps,
+            seed=args.seed,
+        ),
+        tolerance=tolerance,
+        progress=progress,
+        log=sys.stdout,
+    )
+    print()
+    print(diagnosis.summary())
+    folder = out / "diagnosis"
+    written = write_diagnosis_report(
+        folder, diagnosis, tests, reversal_tolerance=tolerance
+    )
+    print(f"  wrote the diagnosis report to {folder}{os.sep}")
+    return written
 
 
 def _demo(args) -> int:
@@ -937,8 +977,12 @@ def _demo(args) -> int:
     out = pathlib.Path(args.out)
     _make_folder(out, "--out")
     results, written = _demo_simulate(args, out)
-    failure, fit_written = _demo_fit(args, out, files, source, progress)
+    failure, fit_written, tests, tolerance = _demo_fit(
+        args, out, files, source, progress
+    )
     written += fit_written
+    if not args.no_diagnose:
+        written += _demo_diagnose(args, out, tests, tolerance, progress)
     print()
     print(f"Wrote {len(written)} files to {out}{os.sep}: ", end="")
     print(", ".join(p.name for p in written))
@@ -1333,6 +1377,11 @@ def _parser() -> argparse.ArgumentParser:
         "--fit",
         metavar="NAMES",
         help=f"comma-separated parameters to fit (default: {','.join(_DEMO_FIT)})",
+    )
+    demo.add_argument(
+        "--no-diagnose",
+        action="store_true",
+        help="skip step 3, the diagnosis of the fitted data (about a minute)",
     )
     _add_solver_options(demo, starts=_DEMO_STARTS)
     demo.set_defaults(run=_demo)

@@ -4,9 +4,9 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, Float, Int
 
-from . import _checks
 from ._abstract import AbstractCableModel, StrainParts, positive_result
 from ._cable import Cable
+from ._checks import check_parameters
 from ._results import RESULTS
 
 
@@ -46,19 +46,6 @@ def kelvin_voigt_step(q0, s0, s1, h, E, eta):
     x = h * E / eta
     decay = jnp.exp(-x)
     return decay * q0 + (-s0 * jnp.expm1(-x) + (s1 - s0) * _ramp_factor(x)) / E
-
-
-def check_parameters(model_name: str, model, names, *, positive=True) -> None:
-    """Raise `ValueError` naming the first concrete field that is not finite (and, with
-    `positive`, not > 0). Traced fields are skipped: `check` flags them instead."""
-    for name in names:
-        value = getattr(model, name)
-        if not _checks.is_concrete(value):
-            continue
-        if positive:
-            _checks.require_positive(f"{model_name}.{name}", value)
-        else:
-            _checks.require_finite(f"{model_name}.{name}", value)
 
 
 class FiveElementState(eqx.Module):

@@ -1,9 +1,8 @@
 import equinox as eqx
-import jax
 import jax.numpy as jnp
-import numpy as np
 from jaxtyping import Array, Float, Int
 
+from . import _checks
 from ._abstract import AbstractCableModel, StrainParts, positive_result
 from ._cable import Cable
 from ._results import RESULTS
@@ -55,6 +54,10 @@ class IntegratedState(eqx.Module):
     short_reversal: Float[Array, ""]
     long_reversal: Float[Array, ""]
     parts: StrainParts
+
+
+# Parameters that must be finite and > 0 (moduli, viscosity, time constants).
+_POSITIVE = ("E1c", "E1r", "E2c", "t_c", "eta0", "E2r", "t_r1", "E3r", "lambda1")
 
 
 class IntegratedModel(AbstractCableModel[IntegratedState]):
@@ -129,39 +132,15 @@ class IntegratedModel(AbstractCableModel[IntegratedState]):
     lambda2: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=-99.73)
 
     def __check_init__(self):
-        for name in (
-            "E1c",
-            "E1r",
-            "E2c",
-            "t_c",
-            "eta0",
-            "E2r",
-            "t_r1",
-            "E3r",
-            "lambda1",
-        ):
-            value = getattr(self, name)
-            if isinstance(value, jax.core.Tracer):
-                continue
-            v = np.asarray(value)
-            if v.dtype == object or not np.all(np.isfinite(v)) or not np.all(v > 0):
-                raise ValueError(
-                    f"IntegratedModel `{name}` must be finite and positive, got {v}."
-                )
-        for name in ("beta", "gamma", "lambda2"):
-            value = getattr(self, name)
-            if isinstance(value, jax.core.Tracer):
-                continue
-            v = np.asarray(value)
-            if not np.all(np.isfinite(v)):
-                raise ValueError(f"IntegratedModel `{name}` must be finite, got {v}.")
-        for name in ("beta", "gamma"):
-            value = getattr(self, name)
-            if not isinstance(value, jax.core.Tracer) and np.any(np.asarray(value) < 0):
-                raise ValueError(
-                    f"IntegratedModel `{name}` must be >= 0 (h >= 1 hardens, Park "
-                    f"Eq. 2), got {np.asarray(value)}."
-                )
+        _checks.check_parameters("IntegratedModel", self, _POSITIVE)
+        _checks.check_parameters("IntegratedModel", self, ("lambda2",), positive=False)
+        _checks.check_parameters(
+            "IntegratedModel",
+            self,
+            ("beta", "gamma"),
+            allow_zero=True,
+            reason="(h = 1 + beta eps**gamma >= 1 hardens, Park Eq. 2).",
+        )
 
     def retardation_time_long(self, cable: Cable) -> Float[Array, ""]:
         """Long-term retardation time t_r2 = lambda1 (L0 / v)^2 - lambda2, s (Eq. 8)."""
@@ -169,15 +148,7 @@ class IntegratedModel(AbstractCableModel[IntegratedState]):
 
     def check(self, cable: Cable) -> RESULTS:
         result = positive_result(
-            self.E1c,
-            self.E1r,
-            self.E2c,
-            self.t_c,
-            self.eta0,
-            self.E2r,
-            self.t_r1,
-            self.E3r,
-            self.retardation_time_long(cable),
+            *(getattr(self, n) for n in _POSITIVE), self.retardation_time_long(cable)
         )
         # Eq. 1 stiffens only while F < E1c A; above it h > 1 would soften the cable.
         ok = (
@@ -205,11 +176,6 @@ class IntegratedModel(AbstractCableModel[IntegratedState]):
             parts=parts,
         )
 
-    def _static_loading(self, state, cable, force):
-        # Park Eq. 1-2: hardening exponent from the previous sample's total strain.
-        h = 1.0 + self.beta * _safe_pow(jnp.maximum(state.strain, 0.0), self.gamma)
-        return _safe_pow(force / (self.E1c * cable.area), h)
-
     def advance(
         self,
         state: IntegratedState,
@@ -218,6 +184,12 @@ class IntegratedModel(AbstractCableModel[IntegratedState]):
         force: Float[Array, ""],
         direction: Int[Array, ""],
     ) -> tuple[IntegratedState, StrainParts]:
+        # Written for the scan's per-sample cost: every sample runs this several times
+        # (the Newton iterations of a rate-driven test), and on a CPU its cost is
+        # mostly the number of separate array operations. So each transcendental is
+        # taken once (a decay and its complement from one expm1; one log per force
+        # ratio), parameter quotients are reciprocals XLA hoists out of the scan, and
+        # nothing depends on `dt` that need not (the Newton derivative is by `jvp`).
         area = cable.area
         branch = jnp.where(direction == 0, state.branch, direction).astype(jnp.int32)
         reversed_ = branch != state.branch
@@ -240,38 +212,45 @@ class IntegratedModel(AbstractCableModel[IntegratedState]):
         tensioned = jnp.maximum(state.force, force) > 1e-4 * cable.breaking_load
         t_total = state.t_total + jnp.where(tensioned, dt, 0.0)
 
-        # Reloading rejoins the loading curve at the last peak (Masing-like), so the
-        # instantaneous strain is continuous at the reversal and cannot ratchet.
-        static = self._static_loading(state, cable, force)
-        static_reversal = self._static_loading(state, cable, force_reversal)
+        # Park Eq. 1-2: (F / (E1c A))**h with the hardening exponent
+        # h = 1 + beta eps_{i-1}**gamma from the previous sample's total strain; the
+        # same h for the force where the branch began. Reloading rejoins the loading
+        # curve at the last peak (Masing-like), so the instantaneous strain is
+        # continuous at the reversal and cannot ratchet.
+        compliance_c = 1.0 / (self.E1c * area)
+        h = 1.0 + self.beta * _safe_pow(jnp.maximum(state.strain, 0.0), self.gamma)
+        static = _safe_pow(force * compliance_c, h)
+        static_reversal = _safe_pow(force_reversal * compliance_c, h)
         span = force_peak - force_reversal
+        has_span = span > 0
         weight = jnp.clip(
-            (force_peak - force) / jnp.where(span > 0, span, 1.0), 0.0, 1.0
+            (force_peak - force) / jnp.where(has_span, span, 1.0), 0.0, 1.0
         )
-        weight = jnp.where(span > 0, weight, 0.0)
+        weight = jnp.where(has_span, weight, 0.0)
         loading_inst = static + (inst_reversal - static_reversal) * weight
         unloading_inst = inst_reversal - (force_reversal - force) / (self.E1r * area)
         inst = jnp.where(loading, loading_inst, unloading_inst)
 
         # Park Eq. 5 with MODEL_NOTES point 2: F_eq (1 - e^{-T/t_c}) / (E2c A) + I/(eta0 A).
-        creep = impulse * _relaxation_average(t_total, self.t_c) / (
-            self.E2c * area
-        ) + impulse / (self.eta0 * area)
+        creep = impulse * (
+            _relaxation_average(t_total, self.t_c) / (self.E2c * area)
+            + 1.0 / (self.eta0 * area)
+        )
 
         # Recoveries relax towards Park's amplitudes while unloading (Eq. 4, 7) and
-        # back towards zero while loading, from their values at the reversal.
+        # back towards zero while loading, from their values at the reversal:
+        # q = amplitude (1 - e^{-tau/t_r}) + q0 e^{-tau/t_r} = q0 + (amplitude - q0) g
+        # with g = 1 - e^{-tau/t_r} = -expm1(-tau/t_r) (one transcendental each).
         f_eq = impulse / jnp.where(t_total > 0, t_total, 1.0)
         t_r2 = self.retardation_time_long(cable)
-        decay_short = jnp.exp(-tau / self.t_r1)
-        decay_long = jnp.exp(-tau / t_r2)
+        grow_short = -jnp.expm1(-tau / self.t_r1)
+        grow_long = -jnp.expm1(-tau / t_r2)
         amplitude_short = jnp.where(loading, 0.0, f_eq / (self.E2r * area))
         amplitude_long = jnp.where(
             loading, 0.0, (force_reversal - force) / (self.E3r * area)
         )
-        short = amplitude_short * -jnp.expm1(-tau / self.t_r1) + short_reversal * (
-            decay_short
-        )
-        long = amplitude_long * -jnp.expm1(-tau / t_r2) + long_reversal * decay_long
+        short = short_reversal + (amplitude_short - short_reversal) * grow_short
+        long = long_reversal + (amplitude_long - long_reversal) * grow_long
 
         parts = StrainParts(
             instantaneous=inst,

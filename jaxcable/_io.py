@@ -196,7 +196,8 @@ class TestData:
         `length_mm` is required; `diameter_mm` defaults to 3 mm and `rate_mm_per_min`
         (the crosshead speed) to 3 mm/min, Park's Dyneema SK78 test. The temperature
         is the metadata's `temperature_C`, else the mean of the temperature column,
-        else the `Cable` default (20 °C).
+        else the `Cable` default (20 °C); the breaking load is `breaking_load_N` when
+        given, else the `Cable` default.
 
         **Returns:**
 
@@ -211,6 +212,8 @@ class TestData:
         diameter_mm = float(self.metadata.get("diameter_mm", DEFAULT_DIAMETER_MM))
         rate = float(self.metadata.get("rate_mm_per_min", DEFAULT_RATE_MM_PER_MIN))
         kwargs = {}
+        if "breaking_load_N" in self.metadata:
+            kwargs["breaking_load"] = float(self.metadata["breaking_load_N"])
         if "temperature_C" in self.metadata:
             kwargs["temperature"] = float(self.metadata["temperature_C"]) + ZERO_CELSIUS
         elif self.temperature is not None:

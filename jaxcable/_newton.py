@@ -13,17 +13,21 @@ class Newton(eqx.Module):
 
     The per-sample problems of jaxcable (the loading time of a force sample, Park
     Eq. 5-6; the force of an imposed elongation) are scalar and smooth, and a good
-    initial guess is known, so Newton converges in two or three steps. This solver
-    takes `unrolled` steps without a loop (cheap under `vmap`, where a
-    `lax.while_loop` costs a batched predicate per iteration), then continues in a
-    `lax.while_loop` only while some sample is unconverged, up to `max_steps`.
+    initial guess is known (along a ramp, the previous sample's duration), so Newton
+    converges in one or two steps. This solver takes `unrolled` steps without a loop,
+    then continues in a `lax.while_loop` only while some sample is unconverged, up to
+    `max_steps`. One unrolled step is the fastest on a CPU (measured in
+    `benchmarks/kernel.py`): each unrolled step is a copy of the model's code in the
+    scan body, and a larger body costs more per sample than the loop's predicate,
+    also under `vmap`, where the loop runs until every lane has converged.
     Derivatives are taken by the implicit function theorem (`jax.lax.custom_root`),
     never through the iterations.
 
     Any optimistix root finder (e.g. `optx.Newton(rtol, atol)`) can be passed
     instead, where a simulation takes `solver=`; it runs through `optx.root_find`
-    (with its `ImplicitAdjoint`) on the same relative residual, and is slower inside
-    the scan.
+    (with its `ImplicitAdjoint`) on the same relative residual, from the same
+    initial guess moved past a turning point as below, and is slower inside the
+    scan.
 
     **Arguments:**
 
@@ -37,7 +41,28 @@ class Newton(eqx.Module):
 
     tol: float
     max_steps: int = 32
-    unrolled: int = 3
+    unrolled: int = 1
+
+
+def _past_turning_point(fn, y, args, slope_sign, growth, max_steps: int = 32):
+    """Grow y <- 2 y + growth until fn's slope at y has the sign `slope_sign`."""
+
+    def wrong_side(y):
+        _, slope = jax.jvp(lambda y: fn(y, args), (y,), (jnp.ones_like(y),))
+        return ~(slope * slope_sign > 0)
+
+    def cond(c):
+        y, k = c
+        return (k < max_steps) & wrong_side(y)
+
+    def body(c):
+        y, k = c
+        return 2 * y + growth, k + 1
+
+    y, _ = jax.lax.while_loop(cond, body, (y, jnp.array(0)))
+    # Only the start of the solve: its derivatives come from the implicit function
+    # theorem at the root, not from here.
+    return jax.lax.stop_gradient(y)
 
 
 def root_scalar(
@@ -56,9 +81,13 @@ def root_scalar(
     lies beyond a turning point of fn, and a Newton step would run away from it: the
     iterate is then grown geometrically instead, y <- 2 y + `growth`. This is what
     makes the loading-time solve robust when a fast recovery briefly outruns the
-    crosshead (a residual that first falls, then rises through zero).
+    crosshead (a residual that first falls, then rises through zero). An optimistix
+    solver gets the same treatment of its initial guess only: it starts from the
+    first y (of guess, 2 guess + growth, ...) where the slope has `slope_sign`.
     """
     if isinstance(solver, optx.AbstractRootFinder):
+        if slope_sign is not None:
+            guess = _past_turning_point(fn, guess, args, slope_sign, growth)
         sol = optx.root_find(
             fn,
             solver,

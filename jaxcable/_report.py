@@ -15,6 +15,7 @@ from typing import TextIO
 import equinox as eqx
 import numpy as np
 
+from ._abstract import AbstractCableModel
 from ._fit import FitResult, pad_tests, residuals
 from ._io import TestData
 
@@ -124,7 +125,10 @@ _residuals = eqx.filter_jit(residuals)
 
 
 def model_elongations(
-    result: FitResult, tests: Sequence[TestData], *, reversal_tolerance: float = 0.0
+    result: FitResult | AbstractCableModel,
+    tests: Sequence[TestData],
+    *,
+    reversal_tolerance: float = 0.0,
 ) -> list[np.ndarray]:
     """The fitted model's elongation (m) at every sample of every test, masked samples
     included, in one vmapped simulation.
@@ -132,7 +136,7 @@ def model_elongations(
     **Arguments:**
 
     - `result`: a [`jaxcable.FitResult`][] of these `tests` (per-test parameters are
-        matched by position).
+        matched by position), or a model.
     - `tests`: the tests, as fitted.
     - `reversal_tolerance`: as given to the fit, N.
 
@@ -151,7 +155,8 @@ def model_elongations(
         for t in tests
     ]
     padded = pad_tests(unmasked)
-    params, static = eqx.partition(result.model, eqx.is_inexact_array)
+    model = result.model if isinstance(result, FitResult) else result
+    params, static = eqx.partition(model, eqx.is_inexact_array)
     r = np.asarray(
         _residuals(params, static, padded, reversal_tolerance=reversal_tolerance)
     )

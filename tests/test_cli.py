@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import jaxcable as jc
-from jaxcable import _cli
+from jaxcable import _cli, _synthetic
 from jaxcable._cli import main
 
 
@@ -721,7 +721,7 @@ def demo_run(tmp_path_factory):
     out = root / "demo_out"
     argv = ["demo", "--out", out, "--samples-per-ramp", _SAMPLES_PER_RAMP]
     status, stdout, stderr = _run(
-        [*argv, "--data", data, "--fit", _DEMO_FIT, "--starts", "1"]
+        [*argv, "--data", data, "--fit", _DEMO_FIT, "--starts", "1", "--no-diagnose"]
     )
     return status, out, stdout, stderr
 
@@ -822,6 +822,12 @@ def test_demo_bundled_data(tmp_path):
     assert result.converged
     assert len(result.test_ids) == len(_cli._bundled_files())
     assert "Wrote" in stdout
+    # Step 3: the diagnosis names the effect hidden in the bundled data.
+    doc = json.loads(
+        (tmp_path / "demo_out" / "diagnosis" / "diagnosis.json").read_text()
+    )
+    assert doc["named_cause"] == _synthetic.BUNDLED_EFFECT
+    assert "named cause: termination_compliance" in stdout
 
 
 @pytest.mark.parametrize("name", list(_cli._MODELS))

@@ -12,7 +12,7 @@ import pytest
 import jaxcable as jc
 from jaxcable import _synthetic
 from jaxcable._cli import main
-from jaxcable._diagnose import noise_level, residual_structure
+from jaxcable._diagnose import heldout_rmse, noise_level, residual_structure
 
 
 @pytest.fixture(scope="module")
@@ -126,10 +126,12 @@ def test_hidden_effect_is_named(effect):
     tests = _synthetic.hidden_effect_dataset(effect, seed=seed)
     d = jc.diagnose(tests)
     assert d.named_cause == (effect or "none"), d.summary()
-    noise_mm = 5e-3  # the generator's elongation noise
-    # The named model predicts the held-out data to within 20 % of the noise (the
-    # force noise adds a little elongation noise of its own).
-    assert d.extended_heldout_rmse_mm <= 1.2 * noise_mm, d.summary()
+    # The named model predicts the held-out data to within 20 % of the noise level:
+    # the held-out RMSE of the data-generating model itself (the 5 um elongation
+    # noise plus the model's response to the 0.05 N force noise it is driven with).
+    floor = heldout_rmse(_synthetic.hidden_effect_model(effect, seed=seed), tests)
+    assert 4e-3 < floor < 8e-3
+    assert d.extended_heldout_rmse_mm <= 1.2 * floor, (floor, d.summary())
     if effect is not None:
         c = d.candidate(effect)
         assert c.significant and c.gain_pct > 0

@@ -22,13 +22,11 @@ PROTOCOL = jc.Protocol.concatenate(
 
 
 def _batch_cable(lengths, speeds):
+    # Every other field keeps its default, broadcast to the batch (whatever the
+    # fields of Cable are).
     n = len(lengths)
-    return jc.Cable(
-        length=jnp.asarray(lengths),
-        speed=jnp.asarray(speeds),
-        diameter=jnp.full(n, 3e-3),
-        breaking_load=jnp.full(n, 2000.0),
-    )
+    cable = jc.Cable(length=jnp.asarray(lengths), speed=jnp.asarray(speeds))
+    return jax.tree_util.tree_map(lambda x: jnp.broadcast_to(x, (n,)), cable)
 
 
 def test_repeated_call_does_not_retrace():

@@ -43,11 +43,10 @@ def test_numpy_baseline_matches_kernel(model):
     params = numpy_baseline.default_parameters(model)
     ref = numpy_baseline.simulate_rate_test_numpy(params, LENGTHS, SPEEDS, arrays)
     assert ref["converged"].all()
-    cables = jc.Cable(
-        length=jnp.asarray(LENGTHS),
-        speed=jnp.asarray(SPEEDS),
-        diameter=jnp.full(3, 3e-3),
-        breaking_load=jnp.full(3, 2000.0),
+    # The other Cable fields keep their defaults, broadcast to the batch.
+    cables = jax.tree_util.tree_map(
+        lambda x: jnp.broadcast_to(x, (3,)),
+        jc.Cable(length=jnp.asarray(LENGTHS), speed=jnp.asarray(SPEEDS)),
     )
     traj = jax.vmap(lambda c: jc.simulate_rate_test(model, c, PROTOCOL))(cables)
     assert traj.elongation.dtype == jnp.float64
