@@ -501,7 +501,9 @@ class _Problem(eqx.Module):
 
     layout: _Layout = eqx.field(static=True)
     static: PyTree = eqx.field(static=True)
-    reversal_tolerance: float = eqx.field(static=True)
+    # Traced, not static: a data-derived tolerance differs from one data set to the
+    # next, and a static one recompiled the fit kernel for each.
+    reversal_tolerance: Float[Array, ""]
     base: PyTree  # the inexact-array fields of the start model (fixed values)
     scales: Float[Array, " names"]  # the s of "linear" parameters, per name
     data: PaddedTests
@@ -655,7 +657,9 @@ def _layout_and_problem(model, tests, fit, per_test, transforms, reversal_tolera
     problem = _Problem(
         layout=layout,
         static=static,
-        reversal_tolerance=float(reversal_tolerance),
+        reversal_tolerance=jnp.asarray(
+            float(reversal_tolerance), jnp.result_type(float)
+        ),
         base=base,
         scales=jnp.asarray(scales, dtype),
         data=data,

@@ -13,6 +13,7 @@ from collections.abc import Sequence
 from typing import TextIO
 
 import equinox as eqx
+import jax.numpy as jnp
 import numpy as np
 
 from ._abstract import AbstractCableModel
@@ -158,7 +159,13 @@ def model_elongations(
     model = result.model if isinstance(result, FitResult) else result
     params, static = eqx.partition(model, eqx.is_inexact_array)
     r = np.asarray(
-        _residuals(params, static, padded, reversal_tolerance=reversal_tolerance)
+        # An array, not a float: filter_jit would recompile for every new value.
+        _residuals(
+            params,
+            static,
+            padded,
+            reversal_tolerance=jnp.asarray(reversal_tolerance, padded.time.dtype),
+        )
     )
     return [r[i, : t.num_samples] + t.elongation for i, t in enumerate(unmasked)]
 
