@@ -90,6 +90,25 @@ class Candidate:
     note: str = ""
     fit: FitResult | None = dataclasses.field(default=None, repr=False, compare=False)
 
+    @classmethod
+    def not_applicable(cls, id: str, extension: type, note: str) -> "Candidate":
+        """A candidate the data cannot show (`note` says why): no fit, no scores."""
+        nan = math.nan
+        return cls(
+            id,
+            nan,
+            nan,
+            nan,
+            nan,
+            nan,
+            nan,
+            extension.SIZE_UNIT,
+            extension.SIZE_FIELD,
+            significant=False,
+            applicable=False,
+            note=note,
+        )
+
     def to_dict(self) -> dict[str, Any]:
         out = dataclasses.asdict(self)
         out.pop("fit")
@@ -638,49 +657,19 @@ def diagnose(
     for ext_id in ids:
         cls = EXTENSIONS[ext_id]
         reason = _applicability(ext_id, tests)
+        if not reason:
+            try:
+                # From the user's start (not the base fit, which has absorbed part
+                # of the effect into the base's parameters and is often a local
+                # minimum for the extended model), then from the base fit when that
+                # fits the training data worse than the base did.
+                starts = [cls.wrap(model), *(cls.wrap(r.model) for r in base_folds)]
+            except ValueError as e:
+                reason = str(e)
         if reason:
-            out.append(
-                Candidate(
-                    ext_id,
-                    math.nan,
-                    math.nan,
-                    math.nan,
-                    math.nan,
-                    math.nan,
-                    math.nan,
-                    cls.SIZE_UNIT,
-                    cls.SIZE_FIELD,
-                    False,
-                    False,
-                    reason,
-                )
-            )
+            out.append(Candidate.not_applicable(ext_id, cls, reason))
             continue
         say(f"fitting candidate {ext_id}")
-        try:
-            # From the user's start (not the base fit, which has absorbed part of
-            # the effect into the base's parameters and is often a local minimum
-            # for the extended model), then from the base fit when that fits the
-            # training data worse than the base did.
-            starts = [cls.wrap(model), *(cls.wrap(r.model) for r in base_folds)]
-        except ValueError as e:
-            out.append(
-                Candidate(
-                    ext_id,
-                    math.nan,
-                    math.nan,
-                    math.nan,
-                    math.nan,
-                    math.nan,
-                    math.nan,
-                    cls.SIZE_UNIT,
-                    cls.SIZE_FIELD,
-                    False,
-                    False,
-                    str(e),
-                )
-            )
-            continue
         fitted = (
             None
             if base_names is None
