@@ -18,6 +18,25 @@ from ._baselines import (
     HookeState as HookeState,
 )
 from ._cable import Cable as Cable
+from ._cdpr import (
+    Robot as Robot,
+    RobotRun as RobotRun,
+    Scenario as Scenario,
+    errors_and_jacobian as errors_and_jacobian,
+    forward_kinematics as forward_kinematics,
+    pick_and_place as pick_and_place,
+    position_loss as position_loss,
+    real_cables as real_cables,
+    simulate_robot as simulate_robot,
+    tension_distribution as tension_distribution,
+    tune_gain as tune_gain,
+)
+from ._controller import (
+    ControllerState as ControllerState,
+    LiveFiveElement as LiveFiveElement,
+    controller_init as controller_init,
+    controller_step as controller_step,
+)
 from ._diagnose import (
     Candidate as Candidate,
     Diagnosis as Diagnosis,
@@ -28,10 +47,15 @@ from ._diagnose import (
 from ._extensions import (
     EXTENSIONS as EXTENSIONS,
     BeddingIn as BeddingIn,
+    BeddingInState as BeddingInState,
     Hereditary as Hereditary,
+    HereditaryState as HereditaryState,
     SecondRetardation as SecondRetardation,
+    SecondRetardationState as SecondRetardationState,
     SensorDrift as SensorDrift,
+    SensorDriftState as SensorDriftState,
     StressNonlinearCreep as StressNonlinearCreep,
+    StressNonlinearCreepState as StressNonlinearCreepState,
     TemperatureShift as TemperatureShift,
     TemperatureShiftWLF as TemperatureShiftWLF,
     TerminationCompliance as TerminationCompliance,

@@ -1,0 +1,178 @@
+"""Controller latency: one jitted `jaxcable.controller_step` for the 8 cables of a
+robot, called from Python as a real-time loop would call it, per model; and the
+amortised cost of one closed-loop sample of the 8-cable robot example inside its
+`lax.scan` (tension distribution + controller + real cables + forward kinematics).
+
+    python benchmarks/controller.py [--cables 8] [--repeats 2000] [--x64] [--sync]
+        [--scan-hours 0.5] [--json-out FILE]
+
+Timings: `jax.jit` of the step with the state, time and forces as arguments, warm-up
+calls, then the median (and 10th/90th percentiles) over `--repeats` calls, each ended
+by `jax.block_until_ready`. Prints one JSON object and a table.
+
+Typical output (2-core CPU shared with other work, load average ~3.5, float64,
+jax 0.10.2; `--x64 --repeats 3000`):
+
+    model                                  throw  median_us   p10_us   p90_us  rate_kHz
+    integrated                             True        43.3     41.7     46.8      23.1
+    integrated                             False       96.0     92.5    115.0      10.4
+    five-element (Piao, live)              True        39.5     38.2     42.0      25.3
+    five-element (Piao, live)              False       91.7     84.8    115.7      10.9
+    Hooke                                  True        30.3     28.6     32.9      33.0
+    Hooke                                  False       25.0     24.0     29.1      40.0
+    integrated + termination, per cable    True        44.6     43.1     47.5      22.4
+    integrated + termination, per cable    False       97.9     94.3    116.2      10.2
+
+    closed loop, one sample inside the scan (1801 samples):
+      none                                     57.9 us
+      Hooke                                    56.7 us
+      five-element (Piao, live)                58.9 us
+      integrated                               62.0 us
+
+With `--sync` (no asynchronous dispatch) every step is 28-46 us, `throw=False`
+included: with asynchronous dispatch a step is sometimes run on another thread, and
+the hand-off costs ~50 us on a busy machine.
+"""
+
+import argparse
+import json
+import os
+import platform
+import statistics
+import time
+
+import jax
+
+
+def _parse():
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--cables", type=int, default=8)
+    p.add_argument("--repeats", type=int, default=2000)
+    p.add_argument("--x64", action="store_true", help="run in float64")
+    p.add_argument(
+        "--sync",
+        action="store_true",
+        help="jax_cpu_enable_async_dispatch=False: run each step on the calling "
+        "thread (what a real-time loop wants; steadier latency on a busy CPU)",
+    )
+    p.add_argument("--scan-hours", type=float, default=0.5)
+    p.add_argument("--json-out", default=None)
+    return p.parse_args()
+
+
+def _times(fn, args, repeats, warmup=50):
+    for _ in range(warmup):
+        jax.block_until_ready(fn(*args))
+    out = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        jax.block_until_ready(fn(*args))
+        out.append(time.perf_counter() - t0)
+    out.sort()
+    q = statistics.quantiles(out, n=10)
+    return {
+        "median_us": 1e6 * statistics.median(out),
+        "p10_us": 1e6 * q[0],
+        "p90_us": 1e6 * q[-1],
+    }
+
+
+def main():
+    args = _parse()
+    if args.x64:
+        jax.config.update("jax_enable_x64", True)
+    if args.sync:
+        jax.config.update("jax_cpu_enable_async_dispatch", False)
+    import jax.numpy as jnp
+
+    import jaxcable as jc
+    from jaxcable import _cdpr, _controller
+
+    n = args.cables
+    robot = _cdpr.Robot()
+    lengths = jnp.linspace(6.5, 8.3, n)
+    cables = robot.cables(lengths)
+    forces = jnp.linspace(50.0, 260.0, n)
+    real = _cdpr.real_cables(jax.random.key(0), num_cables=n)
+    cases = [
+        ("integrated", jc.IntegratedModel(), False),
+        ("five-element (Piao, live)", _controller.LiveFiveElement(), False),
+        ("Hooke", jc.HookeModel(), False),
+        ("integrated + termination, per cable", real, True),
+    ]
+    rows = []
+    for name, model, per_cable in cases:
+        for throw in (True, False):
+            state = _controller.controller_init(model, cables, per_cable=per_cable)
+
+            @jax.jit
+            def control(
+                state, t, forces, model=model, per_cable=per_cable, throw=throw
+            ):
+                return _controller.controller_step(
+                    model,
+                    cables,
+                    state,
+                    t,
+                    forces,
+                    per_cable=per_cable,
+                    throw=throw,
+                )
+
+            state, _ = control(state, 1.0, forces)
+            t = jnp.asarray(2.0, state.cables.time.dtype)
+            timing = _times(control, (state, t, forces), args.repeats)
+            rows.append(
+                {"model": name, "throw": throw, **timing}
+                | {"rate_kHz": 1e3 / timing["median_us"]}
+            )
+
+    # The whole closed loop, amortised per sample inside one scan.
+    scenario = _cdpr.pick_and_place(args.scan_hours)
+    samples = int(scenario.time.shape[0])
+    loop = {}
+    for name, model in _cdpr.compensation_models().items():
+        run = lambda: _cdpr.simulate_robot(robot, scenario, real, model)  # noqa: E731
+        jax.block_until_ready(run())
+        reps = []
+        for _ in range(3):
+            t0 = time.perf_counter()
+            jax.block_until_ready(run())
+            reps.append(time.perf_counter() - t0)
+        loop[name] = 1e6 * statistics.median(reps) / samples
+
+    out = {
+        "cables": n,
+        "dtype": "float64" if args.x64 else "float32",
+        "async_dispatch": not args.sync,
+        "load_average": os.getloadavg(),
+        "jax": jax.__version__,
+        "backend": jax.default_backend(),
+        "cpu": platform.processor() or platform.machine(),
+        "cpu_count": os.cpu_count(),
+        "controller_step": rows,
+        "closed_loop_us_per_sample": loop,
+        "closed_loop_samples": samples,
+    }
+    print(json.dumps(out, indent=2))
+    print()
+    print(
+        f"{'model':38s} {'throw':6s} {'median_us':>9s} {'p10_us':>8s} "
+        f"{'p90_us':>8s} {'rate_kHz':>9s}"
+    )
+    for r in rows:
+        print(
+            f"{r['model']:38s} {str(r['throw']):6s} {r['median_us']:9.1f} "
+            f"{r['p10_us']:8.1f} {r['p90_us']:8.1f} {r['rate_kHz']:9.1f}"
+        )
+    print()
+    print(f"closed loop, one sample inside the scan ({samples} samples):")
+    for name, us in loop.items():
+        print(f"  {name:36s} {us:8.1f} us")
+    if args.json_out:
+        with open(args.json_out, "w") as f:
+            json.dump(out, f, indent=2)
+
+
+if __name__ == "__main__":
+    main()
