@@ -123,13 +123,17 @@ EFFECTS = [None, *jc.EXTENSIONS]
 @pytest.mark.parametrize("effect", EFFECTS, ids=lambda e: e or "none")
 def test_hidden_effect_is_named(effect):
     seed = 11
-    tests = _synthetic.hidden_effect_dataset(effect, seed=seed)
+    # About 3x the documented detection limit (docs/diagnosis.md: the limits are
+    # where 9 of 10 seeds are named; here one seed must be).
+    size = None if effect is None else _synthetic.HIDDEN_EFFECTS[effect]["test"]
+    tests = _synthetic.hidden_effect_dataset(effect, seed=seed, size=size)
     d = jc.diagnose(tests)
     assert d.named_cause == (effect or "none"), d.summary()
     # The named model predicts the held-out data to within 20 % of the noise level:
     # the held-out RMSE of the data-generating model itself (the 5 um elongation
     # noise plus the model's response to the 0.05 N force noise it is driven with).
-    floor = heldout_rmse(_synthetic.hidden_effect_model(effect, seed=seed), tests)
+    true = _synthetic.hidden_effect_model(effect, seed=seed, size=size)
+    floor = heldout_rmse(true, tests)
     assert 4e-3 < floor < 8e-3
     assert d.extended_heldout_rmse_mm <= 1.2 * floor, (floor, d.summary())
     if effect is not None:
