@@ -170,9 +170,9 @@ HIDDEN_EFFECT_DESIGN = (
 # `jaxcable._diagnose.DEFAULT_FIT`.
 _PERTURBED = ("E1c", "E1r", "E2c", "t_c", "eta0", "E2r", "t_r1", "E3r")
 
-# Each effect's documented detection limit ("size", its extension's SIZE_FIELD in
-# SIZE_UNIT: named in >= 9 of 10 seeds by `benchmarks/diagnose_matrix.py`, the
-# confusion matrix of docs/diagnosis.md is at these sizes), weaker sizes tried below it,
+# Each effect's size in the confusion matrix of docs/diagnosis.md ("size", its
+# extension's SIZE_FIELD in SIZE_UNIT; at or just above the detection limit measured by
+# `benchmarks/diagnose_matrix.py`), the weaker sizes of the sweep that found the limit,
 # the size of the one-seed tests of `make test` (about 3x the limit, where detection is
 # no coin toss) and the fixed values of the extension's other parameters.
 HIDDEN_EFFECTS: dict[str, dict] = {

@@ -109,8 +109,10 @@ def test_null_effect_is_base(ext_id):
     cable = jc.Cable(length=0.3, temperature=330.0)  # away from T_ref
     base = _simulate(BASE, cable)
     ext = _simulate(NULL[ext_id](BASE), cable)
-    np.testing.assert_array_equal(ext.elongation, base.elongation)
-    np.testing.assert_array_equal(ext.time, base.time)
+    # Equal to rounding: the wrapper's "+ 0" compiles to a differently fused graph,
+    # which may differ from the base in the last bit.
+    np.testing.assert_allclose(ext.elongation, base.elongation, rtol=1e-13, atol=0)
+    np.testing.assert_allclose(ext.time, base.time, rtol=1e-13, atol=0)
 
 
 def test_start_values_change_the_model():
