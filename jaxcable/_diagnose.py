@@ -645,7 +645,9 @@ def diagnose(
         )
     p_base = len(base_fit.names)
     bic_base = _bic(base_train, n_train, p_base)
-    base_names = base_fit.names if names is not None else None
+    # The candidates refit the base's fitted parameters (all of them when `names` is
+    # None) plus their own effect fields, never the extension's fixed ones.
+    base_names = base_fit.names
 
     # The base's residuals over whole tests, for the structure analysis.
     whole = model_elongations(base_fit, tests, reversal_tolerance=reversal_tolerance)
@@ -670,11 +672,7 @@ def diagnose(
             out.append(Candidate.not_applicable(ext_id, cls, reason))
             continue
         say(f"fitting candidate {ext_id}")
-        fitted = (
-            None
-            if base_names is None
-            else tuple("base." + n for n in base_names) + tuple(cls.EFFECT_FIELDS)
-        )
+        fitted = tuple("base." + n for n in base_names) + tuple(cls.EFFECT_FIELDS)
         held, train_rmse, n, fold_fits = score(
             lambda k: [starts[0], starts[1 + k]], fitted, 1, base_losses
         )

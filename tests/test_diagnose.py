@@ -194,3 +194,26 @@ def test_cli_diagnose_bad_candidate_exits_2(tmp_path, capsys):
     err = capsys.readouterr().err
     assert status == 2
     assert "candidates" in err and len(err.strip().splitlines()) == 1
+
+
+@pytest.mark.slow
+def test_other_base_models_refit_all_their_parameters(clean_tests):
+    # With no DEFAULT_FIT entry every base parameter is fitted, in the base and in
+    # the candidates (never an extension's fixed fields); hereditary needs an
+    # IntegratedModel inside and says so.
+    d = jc.diagnose(
+        clean_tests[:3],
+        jc.BurgersModel(),
+        candidates=["hereditary", "termination_compliance"],
+    )
+    assert set(d.base_fit.names) == {"E1", "eta0", "E2", "eta2"}
+    here = d.candidate("hereditary")
+    assert not here.applicable and "IntegratedModel" in here.note
+    tc = d.candidate("termination_compliance")
+    assert set(tc.fit.names) == {
+        "base.E1",
+        "base.eta0",
+        "base.E2",
+        "base.eta2",
+        "compliance",
+    }
