@@ -33,6 +33,7 @@ from ._abstract import AbstractCableModel
 from ._extensions import EXTENSIONS
 from ._fit import FitResult, IdentifiabilityWarning, _as_test_list, _test_id, fit
 from ._integrated import IntegratedModel
+from ._report import _grid, _time_axis, model_elongations
 from ._slack import reversal_tolerance as default_reversal_tolerance
 
 
@@ -136,6 +137,8 @@ class Diagnosis:
     - `noise_mm`: the elongation noise estimated from the data (robust, from second
         differences), mm.
     - `split`: how held-out data were chosen.
+    - `holdout`: the held-out fraction of every test for the time split, None for
+        cross-validation by tests.
     - `test_ids`: the tests.
     - `base_fit`: the base model's [`jaxcable.FitResult`][] on the training data.
     """
@@ -151,6 +154,7 @@ class Diagnosis:
     structure: dict[str, Any]
     noise_mm: float
     split: str
+    holdout: float | None
     test_ids: tuple[str, ...]
     base_fit: FitResult = dataclasses.field(repr=False, compare=False)
 
@@ -272,6 +276,11 @@ def _with_mask(test, mask: np.ndarray):
     return dataclasses.replace(test, mask=mask)
 
 
+def _cut(n: int, holdout: float) -> int:
+    """The first held-out sample of an `n`-sample test."""
+    return int(round(n * (1.0 - holdout)))
+
+
 def _time_split(tests, holdout: float) -> tuple[list, list]:
     """(training tests, held-out tests): the same tests with complementary masks, the
     last `holdout` fraction of each test's samples held out. The whole history still
@@ -279,8 +288,7 @@ def _time_split(tests, holdout: float) -> tuple[list, list]:
     train, held = [], []
     for test in tests:
         n = len(test.time)
-        cut = int(round(n * (1.0 - holdout)))
-        first = np.arange(n) < cut
+        first = np.arange(n) < _cut(n, holdout)
         train.append(_with_mask(test, first))
         held.append(_with_mask(test, ~first))
     return train, held
@@ -311,8 +319,6 @@ def heldout_rmse(
 
     The pooled RMSE over all held-out samples, mm.
     """
-    from ._report import model_elongations
-
     tests = _as_test_list(tests)
     if reversal_tolerance is None:
         reversal_tolerance = default_reversal_tolerance([t.force for t in tests])
@@ -572,8 +578,6 @@ def diagnose(
                 throw=False,
             )
 
-    from ._report import model_elongations
-
     def folds():
         if split == "time":
             train, held = _time_split(tests, holdout)
@@ -739,6 +743,7 @@ def diagnose(
             if k == len(tests)
             else f"{k}-fold by tests"
         ),
+        holdout=holdout if split == "time" else None,
         test_ids=tuple(_test_id(t, i) for i, t in enumerate(tests)),
         base_fit=base_fit,
     )
@@ -764,8 +769,6 @@ def write_diagnosis_report(
     The paths written.
     """
     from matplotlib.figure import Figure
-
-    from ._report import _grid, _time_axis, model_elongations
 
     out = pathlib.Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -800,9 +803,8 @@ def write_diagnosis_report(
                 lw=0.8,
                 label=f"+ {diagnosis.named_cause}",
             )
-        if diagnosis.split.startswith("last"):
-            frac = float(diagnosis.split.split()[1].rstrip("%")) / 100
-            cut = int(round(len(t.time) * (1 - frac)))
+        if diagnosis.holdout is not None:
+            cut = _cut(len(t.time), diagnosis.holdout)
             if cut < len(t.time):
                 ax.axvspan(x[cut], x[-1], color="tab:orange", alpha=0.12, lw=0)
         ax.axhline(0.0, color="0.3", lw=0.5)
