@@ -19,6 +19,7 @@ cables, Newton iterations in NumPy until every cable of the batch has converged.
 
 import argparse
 import json
+import math
 import os
 import platform
 import time
@@ -46,6 +47,59 @@ PARAMETERS = (
 _STRAIN_FLOOR = 1e-4
 
 
+# As jaxcable._memory: time counts as under tension in proportion to the force below
+# F_on = max(this share of the breaking load, this fraction of the largest force).
+_TENSION_SHARE = 1e-4
+_TENSION_FRACTION = 0.1
+# As jaxcable._five_element._ramp_factor: its Taylor series below this x.
+_SERIES_BELOW = 0.1
+
+
+def _tension_share(f0, f1, f_on):
+    """Mean of min(F / F_on, 1) (0 below 0 N) over a step with the force linear from
+    f0 to f1 (as jaxcable._memory.tension_time_step: the chord of its primitive,
+    the value at the mean force below a change of 1e-6 F_on)."""
+
+    def primitive(f):
+        f = np.maximum(f, 0.0)
+        return np.where(f < f_on, 0.5 * f * f / f_on, f - 0.5 * f_on)
+
+    change = f1 - f0
+    small = np.abs(change) < 1e-6 * f_on
+    chord = (primitive(f1) - primitive(f0)) / np.where(small, 1.0, change)
+    mid = np.clip(0.5 * (f0 + f1) / f_on, 0.0, 1.0)
+    return np.where(small, mid, chord)
+
+
+def _ramp_factor(x):
+    """(1 - (1 - e^-x) / x, its x-derivative): the share of a linear ramp that a
+    Kelvin-Voigt element has not yet followed after x = dt / tau (Taylor series near
+    x = 0, as the kernel)."""
+    small = np.abs(x) < _SERIES_BELOW
+    xs = np.where(small, 1.0, x)
+    direct = (xs + np.expm1(-xs)) / xs
+    d_direct = (-np.expm1(-xs) - xs * np.exp(-xs)) / xs**2
+    # sum_{k>=1} (-1)^(k+1) x^k / (k+1)!, and its derivative.
+    series = sum((-1.0) ** (k + 1) * x**k / math.factorial(k + 1) for k in range(1, 10))
+    d_series = sum(
+        (-1.0) ** (k + 1) * k * x ** (k - 1) / math.factorial(k + 1)
+        for k in range(1, 10)
+    )
+    return np.where(small, series, direct), np.where(small, d_series, d_direct)
+
+
+def _retarded(q0, target0, target1, dt, tau):
+    """As jaxcable._integrated._retarded: q' = (target - q) / tau over dt with the
+    target linear from target0 to target1, exactly; and its dt-derivative for a
+    fixed target1 (the caller adds d target1 / d dt times the ramp factor)."""
+    x = dt / tau
+    decay = np.exp(-x)
+    ramp, d_ramp = _ramp_factor(x)
+    q1 = decay * q0 - np.expm1(-x) * target0 + (target1 - target0) * ramp
+    dq1 = (-decay * q0 + decay * target0 + (target1 - target0) * d_ramp) / tau
+    return q1, dq1
+
+
 def _static_loading(p, area, strain_prev, force):
     # Park Eq. 1-2: (F / (E1c A))**h, h = 1 + beta * eps_{i-1}**gamma.
     h = 1.0 + p["beta"] * np.maximum(strain_prev, 0.0) ** p["gamma"]
@@ -59,6 +113,7 @@ def simulate_rate_test_numpy(
     protocol_arrays,
     *,
     diameter: float = 3e-3,
+    breaking_load: float = 2000.0,
     tol: float = 1e-12,
     max_steps: int = 32,
 ):
@@ -74,6 +129,8 @@ def simulate_rate_test_numpy(
         (s, holds) and optionally `mask`, each of shape (samples,) - the fields of a
         `jaxcable.Protocol` - or the tuple (force, direction, duration[, mask]).
     - `diameter`: cable diameter, m.
+    - `breaking_load`: the cable's breaking load, N (sets the force below which a
+        step counts only in part as time under tension, as `jaxcable.Cable`).
     - `tol`, `max_steps`: Newton tolerance on the relative strain residual, and the
         most Newton steps per sample.
 
@@ -112,11 +169,10 @@ def simulate_rate_test_numpy(
     zeros = lambda: np.zeros(batch)
     # Model state (jaxcable.IntegratedState) and driver state (CableState).
     force_prev, strain_prev, impulse, t_total = zeros(), zeros(), zeros(), zeros()
-    branch = np.ones(batch, int)
-    force_rev, force_peak, inst_rev, tau = zeros(), zeros(), zeros(), zeros()
-    short_rev, long_rev = zeros(), zeros()
-    p_inst, p_short, p_long = zeros(), zeros(), zeros()  # last sample's own parts
+    force_max = zeros()
+    short, long, short_target, long_target = zeros(), zeros(), zeros(), zeros()
     t_now, last_step = zeros(), zeros()
+    f_on = _TENSION_SHARE * breaking_load
 
     out_time = np.empty((batch, n))
     out_strain = np.empty((batch, n))
@@ -127,36 +183,29 @@ def simulate_rate_test_numpy(
         D = duration_seq[i]
         m = mask_seq[i]
 
-        # Branch bookkeeping at the previous sample (independent of the step length).
-        new_branch = branch if d == 0 else np.full(batch, d)
-        rev = new_branch != branch
-        loading = new_branch > 0
-        f_rev = np.where(rev, force_prev, force_rev)
-        f_peak = np.where(rev & ~loading, force_prev, force_peak)
-        i_rev = np.where(rev, p_inst, inst_rev)
-        s_rev = np.where(rev, p_short, short_rev)
-        l_rev = np.where(rev, p_long, long_rev)
-        tau0 = np.where(rev, 0.0, tau)
-        # Reloading rejoins the loading curve at the last peak (Masing-like).
-        span = f_peak - f_rev
-        weight = np.where(
-            span > 0, np.clip((f_peak - F) / np.where(span > 0, span, 1.0), 0, 1), 0.0
+        # The parts that do not depend on the step length: the running maximum, the
+        # instantaneous strain (Park Eq. 1-2 and Eq. 9's unloading line from the
+        # largest force, never below the loading curve), the recovery depth.
+        f_max = np.maximum(force_max, F)
+        drop = f_max - F
+        inst = np.maximum(
+            _static_loading(p, area, strain_prev, f_max) - drop / (p["E1r"] * area),
+            _static_loading(p, area, strain_prev, F),
         )
-        static_rev = _static_loading(p, area, strain_prev, f_rev)
-        inst = np.where(
-            loading,
-            _static_loading(p, area, strain_prev, F) + (i_rev - static_rev) * weight,
-            i_rev - (f_rev - F) / (p["E1r"] * area),
-        )
+        depth = drop / np.maximum(f_max, f_on)
+        long_tgt = drop / (p["E3r"] * area)
         d_impulse = 0.5 * (force_prev + F)
-        # Time under tension: above 1e-4 of the (default 2000 N) breaking load.
-        d_ttotal = (np.maximum(force_prev, F) > 1e-4 * 2000.0).astype(float)
+        # Time under tension per second of the step: the mean over the step of
+        # min(F / F_on, 1) for the force linear over the step, F_on at the step's
+        # largest force so far (as jaxcable._memory).
+        d_ttotal = _tension_share(
+            force_prev, F, np.maximum(f_on, _TENSION_FRACTION * f_max)
+        )
 
         def strain_and_slope(dt):
             """Total strain after a step dt and its derivative d strain / d dt."""
             imp = impulse + d_impulse * dt
             T = t_total + d_ttotal * dt
-            tau_ = tau0 + dt
             pos = T > 0
             Ts = np.where(pos, T, 1.0)
             e_c = np.exp(-Ts / p["t_c"])
@@ -168,19 +217,18 @@ def simulate_rate_test_numpy(
             ) + d_impulse / (p["eta0"] * area)
             feq = imp / Ts
             dfeq = np.where(pos, (d_impulse * Ts - imp * d_ttotal) / Ts**2, d_impulse)
-            # Recoveries relax towards Park's amplitudes while unloading, back to
-            # zero while loading, from their values at the reversal.
-            x1 = np.exp(-tau_ / p["t_r1"])
-            amp_s = np.where(loading, 0.0, feq / (p["E2r"] * area))
-            damp_s = np.where(loading, 0.0, dfeq / (p["E2r"] * area))
-            short = amp_s * (1 - x1) + s_rev * x1
-            dshort = damp_s * (1 - x1) + (amp_s - s_rev) * x1 / p["t_r1"]
-            x2 = np.exp(-tau_ / t_r2)
-            amp_l = np.where(loading, 0.0, (f_rev - F) / (p["E3r"] * area))
-            long = amp_l * (1 - x2) + l_rev * x2
-            dlong = (amp_l - l_rev) * x2 / t_r2
-            total = inst + creep - short - long
-            return total, dcreep - dshort - dlong, (creep, short, long)
+            # Each recovery relaxes towards its amplitude, linear over the step.
+            short_tgt = feq * depth / (p["E2r"] * area)
+            dshort_tgt = dfeq * depth / (p["E2r"] * area)
+            s, ds = _retarded(short, short_target, short_tgt, dt, p["t_r1"])
+            s_slope = ds + dshort_tgt * _ramp_factor(dt / p["t_r1"])[0]
+            lg, dlg = _retarded(long, long_target, long_tgt, dt, t_r2)
+            # The recoveries remove at most the creep that produced them.
+            recovery = s + lg
+            excess = recovery > creep
+            total = inst + creep - np.where(excess, creep, recovery)
+            slope = np.where(excess, 0.0, dcreep - s_slope - dlg)
+            return total, slope, (s, lg, short_tgt)
 
         # Initial guess as the kernel: the previous step inside a ramp, else the time
         # of the instantaneous strain step at speed v (a ramp's first sample) or the
@@ -218,14 +266,12 @@ def simulate_rate_test_numpy(
             dt = np.where(converged, dt, np.maximum(step, 0.0))
         ok &= converged & np.isfinite(dt) & (dt >= 0)
 
-        total, _, (creep, short, long) = strain_and_slope(dt)
+        total, _, (s_new, l_new, s_tgt) = strain_and_slope(dt)
         if m:
-            branch, force_rev, force_peak, inst_rev = new_branch, f_rev, f_peak, i_rev
-            short_rev, long_rev = s_rev, l_rev
             impulse = impulse + d_impulse * dt
             t_total = t_total + d_ttotal * dt
-            tau = tau0 + dt
-            p_inst, p_short, p_long = inst, short, long
+            force_max = f_max
+            short, long, short_target, long_target = s_new, l_new, s_tgt, long_tgt
             force_prev = np.full(batch, F)
             strain_prev = total
             t_now = t_now + dt

@@ -416,9 +416,6 @@ class _Carry(eqx.Module):
     position: Float[Array, " 3"]
 
 
-REVERSAL_TOLERANCE = 0.5  # N, about three times a CDPR load cell's noise
-
-
 def simulate_robot(
     robot: Robot,
     scenario: Scenario,
@@ -479,12 +476,7 @@ def _simulate_robot(robot, scenario, real, controller, gain) -> RobotRun:
             ctrl, predicted = None, jnp.zeros(n, dtype)
         else:
             ctrl, predicted = controller_step(
-                controller,
-                robot.cables(lengths),
-                carry.controller,
-                t,
-                forces,
-                reversal_tolerance=REVERSAL_TOLERANCE,
+                controller, robot.cables(lengths), carry.controller, t, forces
             )
         command = lengths - gain * predicted
         # 3. The real cables stretch under the same forces.
@@ -495,7 +487,6 @@ def _simulate_robot(robot, scenario, real, controller, gain) -> RobotRun:
             t,
             forces,
             per_cable=True,
-            reversal_tolerance=REVERSAL_TOLERANCE,
         )
         # 4. Where the stretched cables put the end-effector.
         stretched = command + elongation - robot.routing

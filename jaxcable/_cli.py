@@ -22,7 +22,6 @@ import equinox as eqx
 import jax
 import numpy as np
 
-from . import _slack
 from ._cable import Cable
 from ._io import TestData, read_csv, read_test, write_csv
 
@@ -252,11 +251,10 @@ def _simulate_history(args) -> int:
     cable = data.cable()
     _check_force(data, cable)
     name, model = _resolve_model(args, per_test_hint=_SIMULATE_PER_TEST)
-    # The same default as `fit`: a PARAMS.json re-simulates the file it was fitted to
-    # the way the fit saw it.
-    tolerance = _reversal_tolerance(args, _slack.force_noise(data.force))
+    # The forces as read, as `fit` drives its model: a PARAMS.json re-simulates the
+    # file it was fitted to exactly as the fit saw it.
     traj = jaxcable.simulate_force_history(
-        model, cable, data.time, data.force, reversal_tolerance=tolerance, throw=False
+        model, cable, data.time, data.force, throw=False
     )
     if traj.result != jaxcable.RESULTS.successful:
         i = _first_bad_sample(traj)
@@ -272,8 +270,6 @@ def _simulate_history(args) -> int:
     metadata["model"] = name
     if args.params:
         metadata["model_params"] = _params_metadata(model)
-    if tolerance > 0:
-        metadata["reversal_tolerance_N"] = tolerance
     out = dataclasses.replace(
         data, elongation=np.asarray(traj.elongation), metadata=metadata
     )
@@ -372,18 +368,12 @@ def _thin(data: TestData, every: int) -> TestData:
 
 def _read_tests(
     paths: Sequence, options: dict, every: int, progress: bool
-) -> tuple[list[TestData], float]:
-    """Read measured tests with `read_test` (canonical or raw), with elongation.
-
-    **Returns:**
-
-    `(tests, noise)`: the tests, thinned to every `every`-th sample, and the largest
-    force noise (robust standard deviation, N) of their full-rate forces.
-    """
+) -> list[TestData]:
+    """Read measured tests with `read_test` (canonical or raw), with elongation,
+    thinned to every `every`-th sample."""
     from ._report import Progress
 
     tests = []
-    noise = 0.0
     with Progress("reading", len(paths), enabled=progress) as bar:
         for path in paths:
             data = read_test(path, **options)
@@ -393,10 +383,9 @@ def _read_tests(
                     "elongation (a column elongation_mm, or name it with --columns)."
                 )
             data.cable()  # raises, naming the file, when length_mm is missing
-            noise = max(noise, _slack.force_noise(data.force))
             tests.append(_thin(data, every))
             bar.advance(note=pathlib.Path(path).name)
-    return tests, noise
+    return tests
 
 
 def _data_options(args) -> dict:
@@ -409,24 +398,6 @@ def _data_options(args) -> dict:
         rate_mm_per_min=args.rate_mm_per_min,
         detect_slack=not args.no_slack,
     )
-
-
-def _reversal_tolerance(args, noise: float) -> float:
-    """`--reversal-tolerance-N`, or `_slack.REVERSAL_NOISE_FACTOR` x the force noise
-    of the data when not given: a noisy force must not flip the model between its
-    loading and unloading laws (Park's model has one law for each)."""
-    if args.reversal_tolerance_N is not None:
-        return args.reversal_tolerance_N
-    return _slack.REVERSAL_NOISE_FACTOR * noise
-
-
-def _tolerance_line(args, tolerance: float) -> str:
-    how = (
-        "--reversal-tolerance-N"
-        if args.reversal_tolerance_N is not None
-        else f"{_slack.REVERSAL_NOISE_FACTOR:g} x the force noise of the data"
-    )
-    return f"reversal tolerance {tolerance:.3g} N ({how})"
 
 
 def _describe_tests(tests: Sequence[TestData], every: int) -> list[str]:
@@ -452,9 +423,7 @@ def _describe_tests(tests: Sequence[TestData], every: int) -> list[str]:
     return lines
 
 
-def _run_fit(
-    model, name: str, tests, *, fit, per_test, args, tolerance: float, progress: bool
-):
+def _run_fit(model, name: str, tests, *, fit, per_test, args, progress: bool):
     """`jaxcable.fit` with the command line's options; identifiability warnings are
     returned in the result (and printed with the summary), not issued."""
     import jaxcable
@@ -474,7 +443,6 @@ def _run_fit(
                 multistart=args.starts,
                 max_steps=args.max_steps,
                 key=jax.random.key(args.seed),
-                reversal_tolerance=tolerance,
                 throw=False,
             )
         except ValueError as e:
@@ -524,11 +492,9 @@ def _fit(args) -> int:
     fit_names = _names_option(args.fit, "--fit", model, name)
     per_test = _names_option(args.per_test, "--per-test", model, name)
     _require_folder_of(args.out, "--out")
-    tests, noise = _read_tests(args.data, _data_options(args), args.every, progress)
-    tolerance = _reversal_tolerance(args, noise)
+    tests = _read_tests(args.data, _data_options(args), args.every, progress)
     print(f"read {len(tests)} file(s):")
     print("\n".join(_describe_tests(tests, args.every)))
-    print(_tolerance_line(args, tolerance))
     result = _run_fit(
         model,
         name,
@@ -536,7 +502,6 @@ def _fit(args) -> int:
         fit=fit_names,
         per_test=per_test,
         args=args,
-        tolerance=tolerance,
         progress=progress,
     )
     failure = _fit_failure(result)
@@ -550,10 +515,7 @@ def _fit(args) -> int:
     if args.report:
         out = pathlib.Path(args.report)
         _make_folder(out, "--report")
-        notes = [
-            f"files: {', '.join(str(p) for p in args.data)}",
-            _tolerance_line(args, tolerance),
-        ]
+        notes = [f"files: {', '.join(str(p) for p in args.data)}"]
         if args.no_slack:
             notes.append("slack detection off (--no-slack)")
         if args.every > 1:
@@ -562,7 +524,6 @@ def _fit(args) -> int:
             out,
             result,
             tests,
-            reversal_tolerance=tolerance,
             title=f"jaxcable fit: model '{name}'",
             notes=notes,
             progress=progress,
@@ -579,7 +540,7 @@ def _fit(args) -> int:
 # diagnose: what the model gets wrong, the named cause, the gain on held-out data
 
 
-def _run_diagnosis(model, name, tests, *, args, tolerance, progress, log):
+def _run_diagnosis(model, name, tests, *, args, progress, log):
     """`jaxcable.diagnose` with the command line's options."""
     from ._diagnose import diagnose
     from ._report import Progress
@@ -597,7 +558,6 @@ def _run_diagnosis(model, name, tests, *, args, tolerance, progress, log):
                 folds=args.folds,
                 multistart=args.starts,
                 max_steps=args.max_steps,
-                reversal_tolerance=tolerance,
                 key=jax.random.key(args.seed),
                 progress=lambda message: print(message, file=log, flush=True),
             )
@@ -616,13 +576,11 @@ def _diagnose(args) -> int:
     )
     if args.report:
         _require_folder_of(args.report, "--report")
-    tests, noise = _read_tests(args.data, _data_options(args), args.every, progress)
-    tolerance = _reversal_tolerance(args, noise)
+    tests = _read_tests(args.data, _data_options(args), args.every, progress)
     print(f"read {len(tests)} file(s):", file=log)
     print("\n".join(_describe_tests(tests, args.every)), file=log)
-    print(_tolerance_line(args, tolerance), file=log)
     diagnosis = _run_diagnosis(
-        model, name, tests, args=args, tolerance=tolerance, progress=progress, log=log
+        model, name, tests, args=args, progress=progress, log=log
     )
     if args.json:
         print(diagnosis.to_json())
@@ -632,9 +590,7 @@ def _diagnose(args) -> int:
     if args.report:
         out = pathlib.Path(args.report)
         _make_folder(out, "--report")
-        written = write_diagnosis_report(
-            out, diagnosis, tests, reversal_tolerance=tolerance
-        )
+        written = write_diagnosis_report(out, diagnosis, tests)
         print(
             f"wrote the report to {out}{os.sep}: {', '.join(p.name for p in written)}",
             file=log,
@@ -850,8 +806,7 @@ def _demo_fit(args, out: pathlib.Path, files: list, source: str, progress: bool)
             else f
             for f in files
         ]
-        tests, noise = _read_tests(paths, {}, args.every, progress)
-    tolerance = _reversal_tolerance(args, noise)
+        tests = _read_tests(paths, {}, args.every, progress)
     result = _run_fit(
         model,
         "integrated",
@@ -859,7 +814,6 @@ def _demo_fit(args, out: pathlib.Path, files: list, source: str, progress: bool)
         fit=names,
         per_test=[],
         args=args,
-        tolerance=tolerance,
         progress=progress,
     )
     failure = _fit_failure(result)
@@ -867,7 +821,7 @@ def _demo_fit(args, out: pathlib.Path, files: list, source: str, progress: bool)
         raise failure
     all_names = _parameter_names(model)
     fixed = [n for n in all_names if n not in names]
-    notes = [f"data: {source}, {len(tests)} tests", _tolerance_line(args, tolerance)]
+    notes = [f"data: {source}, {len(tests)} tests"]
     if fixed:
         notes.append(
             f"fitted {len(names)} of {len(all_names)} parameters; "
@@ -882,7 +836,6 @@ def _demo_fit(args, out: pathlib.Path, files: list, source: str, progress: bool)
         out,
         result,
         tests,
-        reversal_tolerance=tolerance,
         title="jaxcable demo: IntegratedModel fitted to the bundled data set",
         notes=notes,
         progress=progress,
@@ -923,10 +876,10 @@ def _demo_fit(args, out: pathlib.Path, files: list, source: str, progress: bool)
             "physical effect the model lacks (scripts/make_bundled_data.py), so the "
             "fit is imperfect by design: the residuals show what is missing."
         )
-    return failure, [params, *written], tests, tolerance
+    return failure, [params, *written], tests
 
 
-def _demo_diagnose(args, out: pathlib.Path, tests, tolerance: float, progress: bool):
+def _demo_diagnose(args, out: pathlib.Path, tests, progress: bool):
     """Step 3 of the demo: `jaxcable diagnose` on the same tests, report in
     `out/diagnosis/`."""
     import jaxcable
@@ -952,16 +905,13 @@ def _demo_diagnose(args, out: pathlib.Path, tests, tolerance: float, progress: b
             max_steps=args.max_steps,
             seed=args.seed,
         ),
-        tolerance=tolerance,
         progress=progress,
         log=sys.stdout,
     )
     print()
     print(diagnosis.summary())
     folder = out / "diagnosis"
-    written = write_diagnosis_report(
-        folder, diagnosis, tests, reversal_tolerance=tolerance
-    )
+    written = write_diagnosis_report(folder, diagnosis, tests)
     print(f"  wrote the diagnosis report to {folder}{os.sep}")
     return written
 
@@ -977,12 +927,10 @@ def _demo(args) -> int:
     out = pathlib.Path(args.out)
     _make_folder(out, "--out")
     results, written = _demo_simulate(args, out)
-    failure, fit_written, tests, tolerance = _demo_fit(
-        args, out, files, source, progress
-    )
+    failure, fit_written, tests = _demo_fit(args, out, files, source, progress)
     written += fit_written
     if not args.no_diagnose:
-        written += _demo_diagnose(args, out, tests, tolerance, progress)
+        written += _demo_diagnose(args, out, tests, progress)
     print()
     print(f"Wrote {len(written)} files to {out}{os.sep}: ", end="")
     print(", ".join(p.name for p in written))
@@ -1036,16 +984,6 @@ def _positive_float(text: str) -> float:
         raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
     if not (np.isfinite(value) and value > 0):
         raise argparse.ArgumentTypeError(f"{text} must be a positive number")
-    return value
-
-
-def _non_negative_float(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not (np.isfinite(value) and value >= 0):
-        raise argparse.ArgumentTypeError(f"{text} must be a number >= 0")
     return value
 
 
@@ -1104,19 +1042,6 @@ def _add_data_options(parser) -> None:
     )
 
 
-def _add_tolerance_option(parser) -> None:
-    parser.add_argument(
-        "--reversal-tolerance-N",
-        type=_non_negative_float,
-        default=None,
-        metavar="F",
-        help="force changes smaller than F (N) keep the model on its loading or "
-        "unloading branch, so that force noise does not flip it (default: 8 x the "
-        "force noise, the robust standard deviation of the force's second "
-        "differences: 0 for noise-free data)",
-    )
-
-
 def _add_solver_options(parser, starts: int) -> None:
     parser.add_argument(
         "--starts",
@@ -1146,7 +1071,6 @@ def _add_solver_options(parser, starts: int) -> None:
         metavar="K",
         help="fit every K-th sample only, to thin dense exports (default: 1, all)",
     )
-    _add_tolerance_option(parser)
     parser.add_argument(
         "--quiet",
         action="store_true",
@@ -1212,7 +1136,6 @@ def _parser() -> argparse.ArgumentParser:
     sim.add_argument(
         "--out", metavar="OUT.csv", required=True, help="the file to write"
     )
-    _add_tolerance_option(sim)
     sim.set_defaults(run=_simulate)
 
     fit = commands.add_parser(

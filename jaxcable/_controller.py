@@ -320,7 +320,6 @@ def controller_step(
     forces: Float[ArrayLike, " n"],
     *,
     per_cable: bool = False,
-    reversal_tolerance: float = 0.0,
     throw: bool = True,
 ) -> tuple[ControllerState, Float[Array, " n"]]:
     """Advance a set of cables by one time-stamped sample of their forces and return
@@ -350,11 +349,10 @@ def controller_step(
     - `state`: the [`jaxcable.ControllerState`][] after the previous sample.
     - `time`: time of this sample, s (>= the previous sample's time).
     - `forces`: measured cable forces at this sample, N, shape `(n,)`,
-        0 <= force <= `cables.breaking_load`. The force is linear between samples; a
-        rise is a loading step, a fall an unloading step (Park Eq. 9, Piao Eq. 1-3).
+        0 <= force <= `cables.breaking_load`. The force is linear between samples
+        and used as measured, with no deadband: the elongations are those of
+        [`jaxcable.simulate_force_history`][] on the same history.
     - `per_cable`: whether `model` carries one parameter set per cable (static).
-    - `reversal_tolerance`: a force change smaller than this (N) keeps the branch
-        (set it to about three times the load cells' noise).
     - `throw`: raise at runtime when a cable's result is not successful (default).
         With `throw=False` the failures stay in `state.result`, one per cable.
 
@@ -427,14 +425,7 @@ def controller_step(
     cables = _broadcast_cables(cables, n)
 
     def one(model, cable, cable_state, force):
-        new, parts = step(
-            model,
-            cable,
-            cable_state,
-            time,
-            force,
-            reversal_tolerance=reversal_tolerance,
-        )
+        new, parts = step(model, cable, cable_state, time, force)
         return new, parts.total * cable.length
 
     new, elongation = jax.vmap(one, in_axes=(axis, 0, 0, 0))(

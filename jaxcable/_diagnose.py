@@ -34,7 +34,6 @@ from ._extensions import EXTENSIONS
 from ._fit import FitResult, IdentifiabilityWarning, _as_test_list, _test_id, fit
 from ._integrated import IntegratedModel
 from ._report import _grid, _time_axis, model_elongations
-from ._slack import reversal_tolerance as default_reversal_tolerance
 
 
 # The base parameters refitted by default. Park's hardening (beta, gamma) and the
@@ -299,7 +298,6 @@ def heldout_rmse(
     tests,
     *,
     holdout: float = 0.3,
-    reversal_tolerance: float | None = None,
 ) -> float:
     """The RMSE of a given model on the held-out samples of `diagnose`'s time split
     (the last `holdout` fraction of every test), mm.
@@ -313,17 +311,14 @@ def heldout_rmse(
     - `model`: the model, with its parameters.
     - `tests`: the tests ([`jaxcable.TestData`][]).
     - `holdout`: the held-out fraction of every test.
-    - `reversal_tolerance`: N (default: as `diagnose`).
 
     **Returns:**
 
     The pooled RMSE over all held-out samples, mm.
     """
     tests = _as_test_list(tests)
-    if reversal_tolerance is None:
-        reversal_tolerance = default_reversal_tolerance([t.force for t in tests])
     _, held = _time_split(tests, holdout)
-    e = model_elongations(model, held, reversal_tolerance=reversal_tolerance)
+    e = model_elongations(model, held)
     sq = sum(float(np.sum((x - t.elongation)[t.mask] ** 2)) for t, x in zip(held, e))
     n = sum(int(np.sum(t.mask)) for t in held)
     return 1e3 * math.sqrt(sq / n)
@@ -477,7 +472,6 @@ def diagnose(
     folds: int | None = None,
     multistart: int = 1,
     max_steps: int = 256,
-    reversal_tolerance: float | None = None,
     key=None,
     progress=None,
 ) -> Diagnosis:
@@ -508,9 +502,6 @@ def diagnose(
     - `folds`: k for `split="tests"` (default: one fold per test, leave-one-out).
     - `multistart`: starts of the base fit (the candidates start from it).
     - `max_steps`: Levenberg-Marquardt steps per fit.
-    - `reversal_tolerance`: as for [`jaxcable.fit`][], N (default: 8 x the force
-        noise of the data, as `jaxcable fit` uses: a noisy held force must not flip
-        the model between its loading and unloading laws).
     - `key`: PRNG key of the multistart perturbations.
     - `progress`: an optional callable `progress(message: str)` told of each fit.
 
@@ -559,8 +550,6 @@ def diagnose(
         else _with_mask(t, np.ones(len(t.time), bool))
         for t in tests
     ]
-    if reversal_tolerance is None:
-        reversal_tolerance = default_reversal_tolerance([t.force for t in tests])
     names = tuple(fit_names) if fit_names is not None else _default_fit_names(model)
     say = progress or (lambda message: None)
 
@@ -574,7 +563,6 @@ def diagnose(
                 multistart=starts,
                 max_steps=max_steps,
                 key=key,
-                reversal_tolerance=reversal_tolerance,
                 throw=False,
             )
 
@@ -611,17 +599,9 @@ def diagnose(
             results.append(result)
             if not math.isfinite(result.loss):
                 return math.inf, math.inf, 1, results
-            e_train = model_elongations(
-                result, train, reversal_tolerance=reversal_tolerance
-            )
+            e_train = model_elongations(result, train)
             # Shared parameters only, so the fitted model runs on any test.
-            e_held = (
-                e_train
-                if split == "time"
-                else model_elongations(
-                    result, held, reversal_tolerance=reversal_tolerance
-                )
-            )
+            e_held = e_train if split == "time" else model_elongations(result, held)
             for t, e in zip(train, e_train):
                 m = np.asarray(t.mask, bool)
                 sq_train += float(np.sum((e - t.elongation)[m] ** 2))
@@ -654,7 +634,7 @@ def diagnose(
     base_names = base_fit.names
 
     # The base's residuals over whole tests, for the structure analysis.
-    whole = model_elongations(base_fit, tests, reversal_tolerance=reversal_tolerance)
+    whole = model_elongations(base_fit, tests)
     structure = residual_structure(
         tests, [e - t.elongation for t, e in zip(tests, whole)]
     )
@@ -753,9 +733,7 @@ def diagnose(
 # Report
 
 
-def write_diagnosis_report(
-    out, diagnosis: Diagnosis, tests, *, reversal_tolerance: float = 0.0
-) -> list[pathlib.Path]:
+def write_diagnosis_report(out, diagnosis: Diagnosis, tests) -> list[pathlib.Path]:
     """Write the diagnosis report to the folder `out` (created if needed).
 
     Files: `diagnosis.json` ([`jaxcable.Diagnosis.to_json`][]), `summary.md`,
@@ -774,19 +752,13 @@ def write_diagnosis_report(
     out.mkdir(parents=True, exist_ok=True)
     tests = _as_test_list(tests)
     whole = [dataclasses.replace(t, mask=None) for t in tests]
-    base = model_elongations(
-        diagnosis.base_fit, whole, reversal_tolerance=reversal_tolerance
-    )
+    base = model_elongations(diagnosis.base_fit, whole)
     named = (
         diagnosis.candidate(diagnosis.named_cause)
         if diagnosis.named_cause != "none"
         else None
     )
-    extended = (
-        model_elongations(named.fit, whole, reversal_tolerance=reversal_tolerance)
-        if named is not None
-        else None
-    )
+    extended = model_elongations(named.fit, whole) if named is not None else None
 
     rows, cols = _grid(len(tests))
     fig = Figure(figsize=(3.8 * cols, 2.7 * rows + 0.8), layout="constrained")

@@ -19,6 +19,12 @@ the same class-level interface:
 At the null value of its effect parameter (`weight = 0`, `E_k = inf`, `n = 0`,
 `activation_energy = 0`, `compliance = 0`, `s_b = 0`, `drift_rate = 0`) every
 extension reproduces its base model exactly.
+
+Every extension is continuous in the force history (issue 10): none switches on the
+sign of a force change, on a threshold of the force or through a division guard that
+jumps, so a perturbation d of every force sample moves its own contribution by at most
+a stated multiple of d, which does not grow with the total variation of the noise (each
+docstring says how). They receive `direction` only to pass it on to the base.
 """
 
 import math
@@ -34,16 +40,13 @@ from ._abstract import AbstractCableModel, StrainParts
 from ._cable import Cable
 from ._five_element import _ramp_factor
 from ._integrated import IntegratedModel, _relaxation_average, _safe_pow
+from ._memory import running_max, tension_time_step
 from ._results import RESULTS
 
 
 # Gas constant, J/(mol K).
 GAS_CONSTANT = 8.314462618
 _LN10 = math.log(10.0)
-
-# A step counts as under tension above this share of the breaking load: the rule of
-# IntegratedModel (MODEL_NOTES point 6), repeated where an extension keeps its own clock.
-_TENSION_SHARE = 1e-4
 
 
 def _validate(owner: str, module, name: str, predicate, requirement: str) -> None:
@@ -128,6 +131,9 @@ class TerminationCompliance(AbstractCableModel[PyTree]):
     added to the instantaneous strain of the wrapped model. The state is the base
     model's (the termination has no memory).
 
+    **Continuity.** Linear in the force, no memory: a perturbation d of the force
+    moves the extra strain by `compliance` d / L0.
+
     **Fields:**
 
     - `base`: the wrapped model.
@@ -191,7 +197,9 @@ class HereditaryState(eqx.Module):
     - `base`: the wrapped model's state.
     - `force`: force of the previous sample, N.
     - `impulse`: integral of F dt since the first loading, N s.
-    - `t_total`: time under tension since the first loading, s.
+    - `t_total`: time under tension since the first loading, s (the base's clock,
+        `jaxcable._memory.tension_time_step`).
+    - `force_max`: the largest force so far, N (sets the clock's ramp).
     - `kelvin_voigt`: the exact (hereditary) Kelvin-Voigt creep strain.
     """
 
@@ -199,6 +207,7 @@ class HereditaryState(eqx.Module):
     force: Float[Array, ""]
     impulse: Float[Array, ""]
     t_total: Float[Array, ""]
+    force_max: Float[Array, ""]
     kelvin_voigt: Float[Array, ""]
 
 
@@ -227,11 +236,22 @@ class Hereditary(AbstractCableModel[HereditaryState]):
     E2c and t_c are read from the innermost [`jaxcable.IntegratedModel`][] (following
     `.base`), so they are fitted with the base. The extension keeps its own I and T
     with the base's counting rule (MODEL_NOTES point 6: I by the trapezoid rule over
-    every step; T over the steps whose larger end force exceeds 1e-4 of the breaking
-    load). eps_ex takes the exact exponential update for a force linear over the
-    step, on the same clock as T: like the base's creep term it is frozen at rest
-    (an unloaded cable recovers through the base's recovery terms, E2r and E3r), so
-    the correction changes the shape of the creep under load, not the recovery.
+    every step; T by `jaxcable._memory.tension_time_step`, the same continuous clock
+    as the base: time counts in proportion to the force below F_on, fully above,
+    F_on = max(1e-4 of the breaking load, a tenth of the largest force so far)).
+    eps_ex takes the exact exponential update for a force linear over the step, on the
+    same clock as T: like the base's creep term it is frozen at rest (an unloaded cable
+    recovers through the base's recovery terms, E2r and E3r), so the correction
+    changes the shape of the creep under load, not the recovery.
+
+    **Continuity.** No state depends on the sign of a force change or on a threshold
+    of the force: I, T and eps_ex are Lipschitz-continuous in the force history. (The
+    clock used to switch on max(F0, F1) > 1e-4 of the breaking load: a force held
+    near that threshold, or noise crossing it, switched whole steps of relaxation on
+    and off.) Below F_on the clock counts time by F / F_on, so force noise d during a
+    rest near 0 N shifts the clock by up to about d / F_on of the rest's length, and
+    eps_ex relaxes by that much more: the price of freezing the element at rest,
+    shared with the base's T.
 
     Nest it inside a time-changing extension (e.g. `TemperatureShift(Hereditary(m))`),
     not around one, so that both clocks agree.
@@ -271,7 +291,7 @@ class Hereditary(AbstractCableModel[HereditaryState]):
 
     def init(self, cable: Cable) -> HereditaryState:
         zero = _zero(cable, self.weight)
-        return HereditaryState(self.base.init(cable), zero, zero, zero, zero)
+        return HereditaryState(self.base.init(cable), zero, zero, zero, zero, zero)
 
     def check(self, cable: Cable) -> RESULTS:
         ok = _ok(jnp.isfinite(self.weight), self.weight >= 0)
@@ -289,10 +309,9 @@ class Hereditary(AbstractCableModel[HereditaryState]):
         inner = innermost_integrated(self.base)
         area = cable.area
         impulse = state.impulse + 0.5 * (state.force + force) * dt
-        tensioned = jnp.maximum(state.force, force) > _TENSION_SHARE * (
-            cable.breaking_load
-        )
-        dt_tension = jnp.where(tensioned, dt, 0.0)
+        # The base's clock (continuous in the force, no threshold switch).
+        force_max = running_max(state.force_max, force)
+        dt_tension = tension_time_step(state.force, force, dt, cable, force_max)
         t_total = state.t_total + dt_tension
         # Exact Kelvin-Voigt update for a force linear over the step (x = dt / t_c).
         x = dt_tension / inner.t_c
@@ -302,7 +321,9 @@ class Hereditary(AbstractCableModel[HereditaryState]):
         )
         equivalent = impulse * _relaxation_average(t_total, inner.t_c) * compliance
         parts = _add(parts, creep=self.weight * (kelvin_voigt - equivalent))
-        new = HereditaryState(base_state, force, impulse, t_total, kelvin_voigt)
+        new = HereditaryState(
+            base_state, force, impulse, t_total, force_max, kelvin_voigt
+        )
         return new, parts
 
 
@@ -337,6 +358,11 @@ class SecondRetardation(AbstractCableModel[SecondRetardationState]):
     / (A E_k)). Under a constant force F applied at t = 0 it creeps as
     F (1 - exp(-t / tau_k)) / (A E_k) and recovers exponentially at rest. The strain
     is added to the creep part of the base. E_k = inf is the base exactly.
+
+    **Continuity.** A linear element of the force: a perturbation d of every force
+    sample moves its strain by at most d / (A E_k) (the exact update averages the
+    stress history with positive weights summing to at most 1 / E_k), however long
+    the history.
 
     **Fields:**
 
@@ -422,31 +448,46 @@ class StressNonlinearCreepState(eqx.Module):
 
     - `base`: the wrapped model's state.
     - `force`: force of the previous sample, N.
-    - `creep`: the base model's creep strain at the previous sample.
-    - `extra`: the extra creep strain accumulated by the extension.
+    - `creep_max`: the largest creep strain of the base model so far.
+    - `extra_max`: the extra creep laid down while the base's creep set new maxima,
+        sum of (g(sigma) - 1) over the increments of `creep_max`.
     """
 
     base: PyTree
     force: Float[Array, ""]
-    creep: Float[Array, ""]
-    extra: Float[Array, ""]
+    creep_max: Float[Array, ""]
+    extra_max: Float[Array, ""]
 
 
 class StressNonlinearCreep(AbstractCableModel[StressNonlinearCreepState]):
     r"""Creep compliance growing with stress as a power law (Findley / Schapery-like).
 
-    Each growth increment d eps_c of the base model's creep part is scaled by
-    g(sigma) = (sigma / sigma_ref)^n, with sigma = (F0 + F1) / (2 A) the step's mean
-    stress:
+    Each growth of the base model's creep part eps_c to a new largest value is scaled
+    by g(sigma) = (sigma / sigma_ref)^n, with sigma = (F0 + F1) / (2 A) the step's
+    mean stress, and the extra creep follows the base's creep in proportion below
+    that largest value:
 
-        d eps_extra = (g(sigma) - 1) d eps_c              while the base creep grows,
-        d eps_extra = (eps_extra / eps_c) d eps_c          while it recovers,
+        M = max eps_c so far,   X = \int (g(sigma) - 1) dM,
+        eps_extra = (X / M) eps_c   (0 while M = 0),
 
-    i.e. creep accumulated at sigma > sigma_ref is larger than the base's (for n > 0),
-    at sigma < sigma_ref smaller, and a recovering base creep (a linear base at rest)
-    takes the extra creep back in proportion. The extra creep is a state variable, so
-    the strain is continuous when the force changes (no jump), and it is added to the
-    creep part. n = 0 is the base exactly (g = 1, with 0^0 = 1).
+    added to the creep part. So creep accumulated at sigma > sigma_ref is larger than
+    the base's (for n > 0), at sigma < sigma_ref smaller; a recovering base creep (a
+    linear base at rest) takes the extra creep back in proportion, and regrowth below
+    the previous largest creep takes it back again at the same proportion. Where the
+    base creep only grows (a constant or rising load on Park's model) this is
+    d eps_extra = (g(sigma) - 1) d eps_c. The extra creep is a state variable, so
+    the strain is continuous when the force changes (no jump). n = 0 is the base
+    exactly (g = 1, with 0^0 = 1).
+
+    **Continuity.** M is the running maximum of the base creep and X a sum of g over
+    its increments: both move by at most a multiple of a perturbation of the force
+    history, and neither grows with the total variation of noise. (The earlier
+    reading split each step's creep increment by its sign, growth scaled by g,
+    recovery by the current extra/creep share, with a jump of that share where the
+    base creep is 0: where the base creep is stationary, force noise flips the sign
+    of every increment and the extra creep drifted with the total variation of the
+    noise towards (g - 1) eps_c.) eps_extra = (X / M) eps_c with |eps_c| <= M and
+    X / M between min(g) - 1 and max(g) - 1 is continuous as M -> 0.
 
     **Fields:**
 
@@ -512,14 +553,14 @@ class StressNonlinearCreep(AbstractCableModel[StressNonlinearCreepState]):
             self.stress_ref
         )
         gain = jnp.where(self.n == 0, 1.0, _safe_pow(ratio, self.n))
-        increment = parts.creep - state.creep
-        creep_prev = jnp.where(state.creep != 0, state.creep, 1.0)
-        share = jnp.where(state.creep != 0, state.extra / creep_prev, 0.0)
-        extra = state.extra + jnp.where(
-            increment >= 0, (gain - 1.0) * increment, share * increment
+        creep_max = running_max(state.creep_max, parts.creep)
+        extra_max = state.extra_max + (gain - 1.0) * (creep_max - state.creep_max)
+        positive = creep_max > 0
+        share = jnp.where(
+            positive, extra_max / jnp.where(positive, creep_max, 1.0), 0.0
         )
-        new = StressNonlinearCreepState(base_state, force, parts.creep, extra)
-        return new, _add(parts, creep=extra)
+        new = StressNonlinearCreepState(base_state, force, creep_max, extra_max)
+        return new, _add(parts, creep=share * parts.creep)
 
 
 # ----------------------------------------------------------------------------------
@@ -578,6 +619,9 @@ class TemperatureShift(AbstractCableModel[PyTree]):
     instantaneous (time-independent) strains are unchanged. The state is the base's.
     `activation_energy = 0` (a_T = 1) is the base exactly. For the WLF law see
     [`jaxcable.TemperatureShiftWLF`][].
+
+    **Continuity.** a_T depends on the temperature, not on the force: the extension
+    is as continuous in the force history as the base on reduced time.
 
     **Fields:**
 
@@ -653,6 +697,8 @@ class TemperatureShiftWLF(AbstractCableModel[PyTree]):
     otherwise as [`jaxcable.TemperatureShift`][] (reduced time for every
     time-dependent process of the base, T = `cable.temperature`, K). WLF suits
     amorphous polymers above their glass transition; `c1 = 0` is the base exactly.
+    Like it, continuous in the force history as the base is (a_T does not depend on
+    the force).
     Not a diagnosis candidate of its own (`EXTENSIONS["temperature"]` is the
     Arrhenius form, one parameter); its id is `temperature_wlf`.
 
@@ -759,6 +805,13 @@ class BeddingIn(AbstractCableModel[BeddingInState]):
     quadratically over [0, `smoothing`] (it never grows while F <= F_max, and lags
     a rising force by at most `smoothing` / 2).
 
+    **Continuity.** The update F_max + r(F - F_max) has partial derivatives in F_max
+    and in F that are >= 0 and sum to 1, so it is non-expansive: a perturbation d of
+    every force sample moves F_max by at most d, for any number of samples, and
+    eps_b by at most s_b d / F_b. Noise at the largest force raises F_max towards the
+    largest perturbed force, never beyond it (r(x) <= max(x, 0)): no drift with the
+    total variation of the noise.
+
     **Fields:**
 
     - `base`: the wrapped model.
@@ -849,7 +902,8 @@ class SensorDrift(AbstractCableModel[SensorDriftState]):
 
     with t0 the start of the record (the state's elapsed time starts at 0 and adds
     every step's dt). It is added to the creep part (the time-dependent part it is
-    confused with). r takes either sign; 0 is the base exactly.
+    confused with). r takes either sign; 0 is the base exactly. It depends on time
+    only, not on the force.
 
     **Fields:**
 

@@ -415,7 +415,7 @@ def pad_tests(tests, *, multiple: int = 16) -> PaddedTests:
 
 
 def _elongation_history(
-    model, cable, time, force, mask, temperature, reversal_tolerance
+    model, cable, time, force, mask, temperature
 ) -> tuple[Float[Array, " samples"], RESULTS]:
     """The elongation (m) of [`jaxcable.simulate_force_history`][] and its status.
 
@@ -424,20 +424,15 @@ def _elongation_history(
     elongation: inside the solver's loop, XLA on CPU copies a scan's stacked outputs
     at every step, and a full `Trajectory` (every state field, times the Jacobian's
     tangents) made each Jacobian about 20x slower than this. The cable's temperature
-    is the sample's (K), for temperature-dependent models.
-
-    A force reading below `reversal_tolerance` is read as 0 N: within the noise of an
-    unloaded cable. Park's model counts time under tension from a small force on
-    (1e-4 of the breaking load), so a single noise blip at rest otherwise restarts
-    its equivalent-force clock (measured: one 0.2 N reading in a 2 h rest moved a
-    100 mm cable by 1.5 mm).
+    is the sample's (K), for temperature-dependent models. The forces are used as
+    measured (no deadband), so the fit's model is the one every other entry point
+    simulates.
     """
 
     def body(carry: CableState, x):
         t, f, m, temp = x
-        f = jnp.where(f < reversal_tolerance, 0.0, f)
         here = eqx.tree_at(lambda c: c.temperature, cable, temp)
-        new, _ = step(model, here, carry, t, f, reversal_tolerance=reversal_tolerance)
+        new, _ = step(model, here, carry, t, f)
         new = jax.tree_util.tree_map(lambda a, b: jnp.where(m, a, b), new, carry)
         return new, new.strain
 
@@ -451,8 +446,6 @@ def residuals(
     params: PyTree,
     static: PyTree,
     tests: PaddedTests,
-    *,
-    reversal_tolerance: float = 0.0,
 ) -> Float[Array, "tests samples"]:
     """Model minus measured elongation of every test, m: the fit's residual.
 
@@ -466,9 +459,6 @@ def residuals(
         (natural SI values). A leaf of shape `(tests,)` is a per-test parameter (test
         i uses entry i); a scalar leaf is shared by all tests.
     - `tests`: a [`jaxcable.PaddedTests`][] from [`jaxcable.pad_tests`][].
-    - `reversal_tolerance`: force changes smaller than this (N) keep the branch (for
-        noisy measured forces; see [`jaxcable.simulate_force_history`][]), and force
-        readings below it are read as 0 N (noise around an unloaded cable).
 
     **Returns:**
 
@@ -487,7 +477,7 @@ def residuals(
     def one(p, cable, time, force, simulate, weight, measured, temperature):
         model = eqx.combine(p, static)
         elongation, result = _elongation_history(
-            model, cable, time, force, simulate, temperature, reversal_tolerance
+            model, cable, time, force, simulate, temperature
         )
         r = jnp.where(weight > 0, elongation - measured, 0.0)
         return jnp.where(result == RESULTS.successful, r, jnp.nan)
@@ -509,9 +499,6 @@ class _Problem(eqx.Module):
 
     layout: _Layout = eqx.field(static=True)
     static: PyTree = eqx.field(static=True)
-    # Traced, not static: a data-derived tolerance differs from one data set to the
-    # next, and a static one recompiled the fit kernel for each.
-    reversal_tolerance: Float[Array, ""]
     base: PyTree  # the inexact-array fields of the start model (fixed values)
     scales: Float[Array, " names"]  # the s of "linear" parameters, per name
     data: PaddedTests
@@ -547,12 +534,7 @@ class _Problem(eqx.Module):
         )
 
     def residuals(self, u: Float[Array, " p"]) -> Float[Array, "tests samples"]:
-        return residuals(
-            self.params(u),
-            self.static,
-            self.data,
-            reversal_tolerance=self.reversal_tolerance,
-        )
+        return residuals(self.params(u), self.static, self.data)
 
     def ssr(self, u: Float[Array, " p"]) -> Float[Array, ""]:
         return jnp.sum(self.residuals(u) ** 2)
@@ -563,7 +545,7 @@ def _check_model(model: AbstractCableModel, cables: Cable) -> Bool[Array, " test
     return jax.vmap(lambda c: model.check(c) == RESULTS.successful)(cables)
 
 
-def _layout_and_problem(model, tests, fit, per_test, transforms, reversal_tolerance):
+def _layout_and_problem(model, tests, fit, per_test, transforms):
     """Validate the arguments of `fit` / `make_loss`; return (problem, u_start)."""
     if not isinstance(model, AbstractCableModel):
         raise ValueError(
@@ -665,9 +647,6 @@ def _layout_and_problem(model, tests, fit, per_test, transforms, reversal_tolera
     problem = _Problem(
         layout=layout,
         static=static,
-        reversal_tolerance=jnp.asarray(
-            float(reversal_tolerance), jnp.result_type(float)
-        ),
         base=base,
         scales=jnp.asarray(scales, dtype),
         data=data,
@@ -682,7 +661,6 @@ def make_loss(
     fit: Sequence[str] | None = None,
     per_test: Sequence[str] | None = None,
     transforms: Mapping[str, str] | None = None,
-    reversal_tolerance: float = 0.0,
 ) -> tuple[
     Callable[[dict[str, Array]], Float[Array, ""]],
     dict[str, Array],
@@ -710,8 +688,7 @@ def make_loss(
 
     **Arguments:**
 
-    - `model`, `tests`, `fit`, `per_test`, `transforms`, `reversal_tolerance`: as in
-        [`jaxcable.fit`][].
+    - `model`, `tests`, `fit`, `per_test`, `transforms`: as in [`jaxcable.fit`][].
 
     **Returns:**
 
@@ -722,7 +699,7 @@ def make_loss(
     fields as `(tests,)` arrays).
     """
     problem, u0 = _layout_and_problem(
-        model, _as_test_list(tests), fit, per_test, transforms, reversal_tolerance
+        model, _as_test_list(tests), fit, per_test, transforms
     )
     layout = problem.layout
 
@@ -1342,7 +1319,6 @@ def fit(
     multistart: int = 4,
     spread: float = 0.5,
     key: PRNGKeyArray | None = None,
-    reversal_tolerance: float = 0.0,
     throw: bool = True,
 ) -> FitResult:
     """Fit a model's parameters to one or many tests by least squares on elongation.
@@ -1429,9 +1405,6 @@ def fit(
     - `spread`: standard deviation of the start perturbations in u.
     - `key`: a `jax.random` key for the perturbations; default `jax.random.key(0)`, so
         that a fit is reproducible unless asked otherwise.
-    - `reversal_tolerance`: force changes smaller than this (N) keep the loading or
-        unloading branch, and readings below it are read as 0 N (set it above the
-        force noise of measured data; `jaxcable fit` uses 8 x the noise).
     - `throw`: raise `RuntimeError` when no start converged (default), with the
         solver's message and the identifiability warnings; with `False` return the
         best start with `converged=False` and the solver's `message`.
@@ -1463,9 +1436,7 @@ def fit(
             f"{type(solver).__name__}."
         )
     test_list = _as_test_list(tests)
-    problem, u_user = _layout_and_problem(
-        model, test_list, fit, per_test, transforms, reversal_tolerance
-    )
+    problem, u_user = _layout_and_problem(model, test_list, fit, per_test, transforms)
     layout = problem.layout
     weight = np.asarray(problem.data.weight)
     num_samples = weight.sum(axis=1).astype(int)

@@ -7,6 +7,7 @@ from jaxtyping import Array, Float, Int
 from ._abstract import AbstractCableModel, StrainParts, positive_result
 from ._cable import Cable
 from ._checks import check_parameters
+from ._memory import running_max
 from ._results import RESULTS
 
 
@@ -51,30 +52,33 @@ def kelvin_voigt_step(q0, s0, s1, h, E, eta):
 class FiveElementState(eqx.Module):
     """Scan carry of [`jaxcable.FiveElementModel`][] for one cable (all SI).
 
-    The two families of Kelvin-Voigt strains are driven by the stress increments made
-    on each branch (Boltzmann superposition with branch-dependent kernels).
+    The stress is split continuously into a loading part, the largest stress so far,
+    and an unloading part, the drop below it; each drives its own family of
+    Kelvin-Voigt elements (Boltzmann superposition with family-dependent kernels).
+    No field depends on the sign of a force change.
 
     **Fields:**
 
     - `stress`: total stress sigma = F / A at the previous sample, Pa.
-    - `branch`: +1 loading, -1 unloading (the branch of the previous step).
-    - `sigma_L`: sum of the stress increments made while loading, Pa (>= 0 for a
-        monotone start).
-    - `sigma_UL`: sum of the stress increments made while unloading, Pa (<= 0).
+    - `sigma_L`: the largest stress so far, Pa (>= 0): the stress that drives the
+        loading family.
     - `q_L2`, `q_L3`: strains of the loading Kelvin-Voigt elements (E_L2, eta_L2) and
         (E_L3, eta_L3) driven by `sigma_L`.
     - `q_UL2`, `q_UL3`: strains of the unloading elements (E_UL2, eta_UL2) and
-        (E_UL3, eta_UL3) driven by `sigma_UL` (<= 0: recovery).
+        (E_UL3, eta_UL3) driven by sigma_UL = `stress` - `sigma_L` (<= 0: recovery).
     """
 
     stress: Float[Array, ""]
-    branch: Int[Array, ""]
     sigma_L: Float[Array, ""]
-    sigma_UL: Float[Array, ""]
     q_L2: Float[Array, ""]
     q_L3: Float[Array, ""]
     q_UL2: Float[Array, ""]
     q_UL3: Float[Array, ""]
+
+    @property
+    def sigma_UL(self) -> Float[Array, ""]:
+        """The drop of the stress below its largest value so far, Pa (<= 0)."""
+        return self.stress - self.sigma_L
 
 
 _FIVE_ELEMENT_FIELDS = (
@@ -108,25 +112,46 @@ class FiveElementModel(AbstractCableModel[FiveElementState]):
     and the unloading ramp. Eq. 2 prints eta_UL2 in the exponent of the E_UL3 term;
     it is read as eta_UL3 (MODEL_NOTES point 10).
 
-    **Superposition reading, any force history.** The stress increments made while
-    loading and while unloading are accumulated separately, sigma_L (loading steps) and
-    sigma_UL (unloading steps, negative), and each drives its own family of elements
-    with its own kernel:
+    **Superposition reading, any force history.** The stress is split into a loading
+    part, the largest stress so far, and an unloading part, the drop below it,
+
+        sigma_L(t) = max_{s <= t} sigma(s),   sigma_UL(t) = sigma(t) - sigma_L(t) <= 0,
+
+    (sigma_L + sigma_UL = sigma), and each drives its own family of elements with its
+    own kernel:
 
         eps = sigma_L / E_L1 + q_L2 + q_L3 + sigma_UL / E_UL1 + q_UL2 + q_UL3,
         eta_k q_k' + E_k q_k = sigma_family(t)   (k = L2, L3 driven by sigma_L;
                                                    k = UL2, UL3 driven by sigma_UL).
 
-    The force is linear between samples, so each element is advanced by its exact
-    exponential update (no time-step error). The branch of a
-    step is `direction` (+1 loading, -1 unloading, 0 keeps the previous branch) and the
-    step's stress increment goes to that branch's family. With equal L and UL parameters
-    this is the linear five-element (generalised Kelvin) solid: Eq. 1 and Eq. 3 hold
-    exactly as printed (Eq. 3 being the instantaneous-unloading limit) and Eq. 2 in its
-    superposition reading. With different sets the loading family keeps relaxing
+    The force is linear between samples, so both parts are piecewise linear over a
+    step (the running maximum has one kink, where the stress passes its previous
+    maximum) and each element is advanced by its exact exponential update, split at
+    that kink (no time-step error). With equal L and UL parameters this is the linear
+    five-element (generalised Kelvin) solid: Eq. 1 and Eq. 3 hold exactly as printed
+    (Eq. 3 being the instantaneous-unloading limit) and Eq. 2 in its superposition
+    reading. On Piao's paths (a load step or ramp from zero, one unloading, a rest)
+    sigma_L is the applied load and sigma_UL the removed one, so this is exactly the
+    superposition of Eq. 2-3. With different sets the loading family keeps relaxing
     towards sigma_L while the unloading family recovers with its own kernel, so a
     load-unload cycle leaves sigma_0 (1/E_L1 - 1/E_UL1) at once, plus the difference
     of the two families' retarded strains.
+
+    **Cycles below the previous maximum.** A reloading that stays below the largest
+    stress so far raises sigma_UL back towards 0: it takes the recovery back with the
+    UL kernel instead of adding more stress to the loading family, and only a stress
+    above the previous maximum loads the L family again. This is the choice that keeps
+    the strain continuous in the force history. The earlier reading (each step's
+    increment to the family of its branch, the sign of the force change) made sigma_L
+    the sum of all upward increments: under a measured force every noise blip is a
+    reversal, so sigma_L grew with the total variation of the noise and the strain
+    drifted (12 mm per N of noise on a 300 mm cable, `benchmarks/continuity.py`). Here
+    a perturbation d of every force sample moves sigma_L by at most d / A and
+    sigma_UL by at most 2 d / A, so the strain moves by at most
+
+        (d / A) (1/E_L1 + 1/E_L2 + 1/E_L3 + 2 (1/E_UL1 + 1/E_UL2 + 1/E_UL3)),
+
+    however long or noisy the history. `direction` is not used.
 
     **Strain parts.** `instantaneous` = sigma_L / E_L1 + sigma_UL / E_UL1 (both springs),
     `creep` = q_L2 + q_L3, `recovery_short` = -q_UL2, `recovery_long` = -q_UL3.
@@ -174,14 +199,7 @@ class FiveElementModel(AbstractCableModel[FiveElementState]):
     def init(self, cable: Cable) -> FiveElementState:
         zero = jnp.zeros((), jnp.result_type(float, self.E_L1, cable.length))
         return FiveElementState(
-            stress=zero,
-            branch=jnp.array(1, jnp.int32),
-            sigma_L=zero,
-            sigma_UL=zero,
-            q_L2=zero,
-            q_L3=zero,
-            q_UL2=zero,
-            q_UL3=zero,
+            stress=zero, sigma_L=zero, q_L2=zero, q_L3=zero, q_UL2=zero, q_UL3=zero
         )
 
     def advance(
@@ -192,37 +210,45 @@ class FiveElementModel(AbstractCableModel[FiveElementState]):
         force: Float[Array, ""],
         direction: Int[Array, ""],
     ) -> tuple[FiveElementState, StrainParts]:
+        # `direction` is not used: the split of the stress into its running maximum
+        # and the drop below it is continuous in the force history (class docstring).
+        del direction
         stress = force / cable.area
-        branch = jnp.where(direction == 0, state.branch, direction).astype(jnp.int32)
-        loading = branch > 0
-        # Piao Section 3.1: the increment of this step is superposed with the kernel
-        # of its branch; the other family keeps its stress (still relaxing towards it).
-        increment = stress - state.stress
-        sigma_L = state.sigma_L + jnp.where(loading, increment, 0.0)
-        sigma_UL = state.sigma_UL + jnp.where(loading, 0.0, increment)
-        q_L2 = kelvin_voigt_step(
-            state.q_L2, state.sigma_L, sigma_L, dt, self.E_L2, self.eta_L2
-        )
-        q_L3 = kelvin_voigt_step(
-            state.q_L3, state.sigma_L, sigma_L, dt, self.E_L3, self.eta_L3
-        )
-        q_UL2 = kelvin_voigt_step(
-            state.q_UL2, state.sigma_UL, sigma_UL, dt, self.E_UL2, self.eta_UL2
-        )
-        q_UL3 = kelvin_voigt_step(
-            state.q_UL3, state.sigma_UL, sigma_UL, dt, self.E_UL3, self.eta_UL3
-        )
+        sigma_L = running_max(state.sigma_L, stress)
+        # The stress is linear over the step; its running maximum is constant until
+        # the stress passes the previous maximum, at the share `split` of the step,
+        # and follows it from there. Both families are advanced exactly over the two
+        # pieces (the second has length 0 unless the step sets a new maximum).
+        passes = stress > state.sigma_L
+        rise = jnp.where(passes, stress - state.stress, 1.0)
+        split = jnp.where(passes, (state.sigma_L - state.stress) / rise, 1.0)
+        stress_split = jnp.where(passes, state.sigma_L, stress)
+        h1, h2 = split * dt, (1.0 - split) * dt
+        ul0 = state.stress - state.sigma_L
+        ul_split = stress_split - state.sigma_L
+        ul1 = stress - sigma_L
+
+        def loading(q, E, eta):
+            q = kelvin_voigt_step(q, state.sigma_L, state.sigma_L, h1, E, eta)
+            return kelvin_voigt_step(q, state.sigma_L, sigma_L, h2, E, eta)
+
+        def unloading(q, E, eta):
+            q = kelvin_voigt_step(q, ul0, ul_split, h1, E, eta)
+            return kelvin_voigt_step(q, ul_split, ul1, h2, E, eta)
+
+        q_L2 = loading(state.q_L2, self.E_L2, self.eta_L2)
+        q_L3 = loading(state.q_L3, self.E_L3, self.eta_L3)
+        q_UL2 = unloading(state.q_UL2, self.E_UL2, self.eta_UL2)
+        q_UL3 = unloading(state.q_UL3, self.E_UL3, self.eta_UL3)
         parts = StrainParts(
-            instantaneous=sigma_L / self.E_L1 + sigma_UL / self.E_UL1,
+            instantaneous=sigma_L / self.E_L1 + ul1 / self.E_UL1,
             creep=q_L2 + q_L3,
             recovery_short=-q_UL2,
             recovery_long=-q_UL3,
         )
         new_state = FiveElementState(
             stress=stress,
-            branch=branch,
             sigma_L=sigma_L,
-            sigma_UL=sigma_UL,
             q_L2=q_L2,
             q_L3=q_L3,
             q_UL2=q_UL2,

@@ -5,6 +5,8 @@ from jaxtyping import Array, Float, Int
 from . import _checks
 from ._abstract import AbstractCableModel, StrainParts, positive_result
 from ._cable import Cable
+from ._five_element import _ramp_factor
+from ._memory import running_max, tension_force, tension_time_step
 from ._results import RESULTS
 
 
@@ -22,23 +24,40 @@ def _relaxation_average(t, tau):
     return jnp.where(positive, -jnp.expm1(-t_safe / tau) / t_safe, 1.0 / tau)
 
 
+def _retarded(q0, target0, target1, dt, tau):
+    """Exact value after `dt` of q' = (target - q) / tau with the target linear over
+    the step from `target0` to `target1` (a Kelvin-Voigt element driven by a
+    piecewise-linear input); finite values and gradients at dt = 0.
+
+    q1 = a q0 + (1 - a) target0 + (target1 - target0) (1 - (tau / dt)(1 - a)),
+    a = exp(-dt / tau).
+    """
+    x = dt / tau
+    return (
+        jnp.exp(-x) * q0
+        - jnp.expm1(-x) * target0
+        + (target1 - target0) * _ramp_factor(x)
+    )
+
+
 class IntegratedState(eqx.Module):
     """Scan carry of [`jaxcable.IntegratedModel`][] for one cable (all SI).
+
+    Every field is a continuous function of the force history (no branch flag, no
+    clock restarted at a reversal): see the model's docstring.
 
     **Fields:**
 
     - `force`: force of the previous sample, N.
     - `strain`: total strain of the previous sample (the epsilon_{i-1} of Park Eq. 2).
     - `impulse`: integral of F dt since the first loading, N s (MODEL_NOTES point 6).
-    - `t_total`: time under tension since the first loading, s.
-    - `branch`: +1 loading, -1 unloading.
-    - `force_reversal`: force where the current branch began, N (F_f of Park Eq. 9
-        on an unloading branch).
-    - `force_peak`: force where the last unloading began, N (0 before any).
-    - `inst_reversal`: instantaneous strain where the current branch began.
-    - `tau`: time since the current branch began, s.
-    - `short_reversal`, `long_reversal`: short- and long-term recovery strains where
-        the current branch began.
+    - `t_total`: time under tension since the first loading, s (a step at a force
+        below 1e-4 of the breaking load counts in proportion to the force).
+    - `force_max`: the largest force so far, N (F_f of Park Eq. 7 and 9).
+    - `short`, `long`: short- and long-term recovery strains before the creep bound
+        (Park Eq. 4 and 7).
+    - `short_target`, `long_target`: the recovery amplitudes they relax towards at
+        the previous sample.
     - `parts`: the [`jaxcable.StrainParts`][] of the previous sample.
     """
 
@@ -46,13 +65,11 @@ class IntegratedState(eqx.Module):
     strain: Float[Array, ""]
     impulse: Float[Array, ""]
     t_total: Float[Array, ""]
-    branch: Int[Array, ""]
-    force_reversal: Float[Array, ""]
-    force_peak: Float[Array, ""]
-    inst_reversal: Float[Array, ""]
-    tau: Float[Array, ""]
-    short_reversal: Float[Array, ""]
-    long_reversal: Float[Array, ""]
+    force_max: Float[Array, ""]
+    short: Float[Array, ""]
+    long: Float[Array, ""]
+    short_target: Float[Array, ""]
+    long_target: Float[Array, ""]
     parts: StrainParts
 
 
@@ -61,50 +78,64 @@ _POSITIVE = ("E1c", "E1r", "E2c", "t_c", "eta0", "E2r", "t_r1", "E3r", "lambda1"
 
 
 class IntegratedModel(AbstractCableModel[IntegratedState]):
-    r"""Park et al.'s integrated nonlinear dynamic model of a polymer cable.
+    r"""Park et al.'s integrated nonlinear dynamic model of a polymer cable, in a
+    reading that is continuous in the force history.
 
-    Strain (dimensionless) of sample i, with A the cross-section, I = \int F dt and
-    T the time under tension since the first loading (MODEL_NOTES points 2-7):
+    Strain (dimensionless) of sample i, with A the cross-section, I = \int F dt, T the
+    time under tension since the first loading and F_m the largest force so far
+    (MODEL_NOTES points 2-7; `docs/continuity.md` derives and measures the reading):
 
-    - loading (Park Eq. 9, first case, with the creep sign read as + and the dashpot
-      term as I / (eta0 A)):
-      eps = (F / (E1c A))**h + (I / T) (1 - exp(-T / t_c)) / (E2c A) + I / (eta0 A),
-      with the hardening exponent h = 1 + beta * eps_{i-1}**gamma (Park Eq. 1-2);
-    - unloading (Park Eq. 9, second case), from the force F_f where unloading began and
-      the time tau since then: the instantaneous strain falls by (F_f - F) / (E1r A),
-      creep keeps its equivalent-force form (Eq. 5), and two recoveries are removed:
-      short-term (I / T) (1 - exp(-tau / t_r1)) / (E2r A) (Eq. 4-5) and long-term
-      (F_f - F) (1 - exp(-tau / t_r2)) / (E3r A) (Eq. 7) with the rate-dependent
-      retardation time t_r2 = lambda1 / (v / L0)**2 - lambda2 (Eq. 8).
+    - instantaneous (Park Eq. 1-2 and the first terms of Eq. 9):
+      e_i = max((F_m / (E1c A))**h - (F_m - F) / (E1r A), (F / (E1c A))**h),
+      with the hardening exponent h = 1 + beta * eps_{i-1}**gamma (Eq. 2). On the
+      first loading F = F_m and this is (F / (E1c A))**h (Eq. 9, loading); below the
+      largest force it is Eq. 9's unloading line from the peak F_f = F_m, on which
+      the cable also reloads (the bedding-in of a rope: the first loading sets a
+      permanent constructional elongation, later cycles below it are stiffer). The
+      max keeps it at or above the loading curve, so it is never negative;
+    - creep (Park Eq. 5 with MODEL_NOTES point 2):
+      c = (I / T) (1 - exp(-T / t_c)) / (E2c A) + I / (eta0 A);
+    - recoveries (Park Eq. 4 and 7), each a Kelvin-Voigt strain q relaxing towards
+      an amplitude set by how far the force has fallen below F_m,
+      q' = (q_target - q) / t_r, with
+      short: q_target = (I / T) ((F_m - F) / F_m) / (E2r A), t_r = t_r1 (Eq. 4-5);
+      long: q_target = (F_m - F) / (E3r A), t_r = t_r2 = lambda1 / (v / L0)**2 -
+      lambda2 (Eq. 7-8);
+    - eps = e + c - s (q_short + q_long), with s = min(1, c / (q_short + q_long)):
+      the recoveries remove at most the creep that produced them, so no history
+      leaves the cable shorter than its instantaneous set (>= 0).
 
-    Beyond the paper's paths (one loading, one unloading, a rest), any force history
-    needs a reading of what a reversal does; this one keeps the strain continuous and
-    bounded, and reduces to Eq. 1-9 exactly on Park's paths:
+    **Why this reading.** Eq. 9 as printed switches on a loading/unloading flag and
+    starts both recoveries, at full amplitude, on a clock restarted at the reversal.
+    Under a measured force every downward noise blip is a reversal: the strain jumps
+    by a share of the full short-term amplitude however small the blip (measured on
+    the previous reading: 1e-6 N of noise moved a 300 mm cable by 0.95 mm). Here no
+    state depends on the sign of a force change: every memory (I, T, F_m, the two
+    recovery strains) is Lipschitz-continuous in the force history, and a force
+    perturbation d moves the strain by at most about
+    d (1/E1r + 1/E2r + 1/E3r) / A plus what d integrates to through the creep terms.
+    The recovery amplitudes grow with the depth of the unloading, in proportion to
+    the force drop, as Boltzmann superposition of a load decrease makes them; they
+    reach Park's amplitudes (I / T) / (E2r A) and F_f / (E3r A) at 0 N, and a
+    reloading takes them back at the same rates.
 
-    - the recoveries are state variables. On an unloading branch each relaxes from its
-      value q0 at the reversal towards its Eq. 4 / Eq. 7 amplitude:
-      q = amplitude (1 - exp(-tau / t_r)) + q0 exp(-tau / t_r) (q0 = 0 on the first
-      unloading: Eq. 7 as printed); on a loading branch the load takes them back,
-      q = q0 exp(-tau / t_r). Repeated small unloadings therefore never add up to more
-      recovery than one large one (a frozen-recovery reading drifts without bound
-      under a robot's thousands of load changes);
-    - the instantaneous strain on reloading starts where unloading left it and
-      rejoins the loading curve (F / (E1c A))**h at the force where the last
-      unloading began (Masing-like), so the elastic part forms a closed loop and does
-      not ratchet; creep alone accumulates, as in Park Fig. 2 (arrow 3).
+    **On Park's paths** (a loading, a full unloading, a rest at 0 N) the loading
+    branch and the instantaneous unloading are Eq. 1-9 exactly, and so are both
+    recoveries from the moment the force reaches 0 N, up to the lag built up while
+    the amplitude ramps in during the unloading (Park starts the full amplitude at the
+    reversal): that lag decays as exp(-tau / t_r). `docs/continuity.md` measures the
+    difference on Park's protocols. Cycles reload along the unloading line instead of
+    jumping back to the loading curve at 0 N.
 
     Hysteresis is not modelled separately: it emerges from creep, hardening and
-    recovery (Park Section 3.3).
-
-    The equivalent force I / T replaces the hereditary integral of the Kelvin-Voigt
-    creep (MODEL_NOTES point 4); this is the paper's model, kept as printed.
+    recovery (Park Section 3.3). The equivalent force I / T replaces the hereditary
+    integral of the Kelvin-Voigt creep (MODEL_NOTES point 4); this is the paper's
+    model, kept as printed.
 
     The default parameters are a Dyneema SK78 3 mm set obtained as MODEL_NOTES point 9
     describes: `jaxcable.calibrate_sk78()` (Levenberg-Marquardt on the errors, in %, of
     the numbers Park prints: creep ratio, residual elongations, Table 3; all < 5 %),
-    rounded to 4 digits, under physical constraints (gamma >= 1, an instantaneous set
-    >= 0, a short-term recovery slower than the crosshead, no rest ending shorter than
-    new); see `jaxcable._sk78` and `notebooks/01_papers.ipynb`.
+    rounded to 4 digits; see `jaxcable._sk78` and `notebooks/01_papers.ipynb`.
 
     **Fields (SI):**
 
@@ -118,18 +149,18 @@ class IntegratedModel(AbstractCableModel[IntegratedState]):
     - `lambda1` (1/s), `lambda2` (s): long-term retardation time law (Eq. 8).
     """
 
-    E1c: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=2.566e9)
-    beta: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.08153)
-    gamma: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=1.344)
-    E1r: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=2.670e9)
-    E2c: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=3.799e8)
-    t_c: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=8.632)
-    eta0: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=4.794e11)
-    E2r: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=3.191e9)
-    t_r1: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=53.11)
-    E3r: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=7.989e8)
-    lambda1: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=2.883e-3)
-    lambda2: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=-99.73)
+    E1c: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=2.597e9)
+    beta: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.05465)
+    gamma: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=2.258)
+    E1r: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=2.63e9)
+    E2c: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=3.888e8)
+    t_c: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=8.251)
+    eta0: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=4.504e11)
+    E2r: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=3.709e9)
+    t_r1: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=35.88)
+    E3r: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=7.906e8)
+    lambda1: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.002825)
+    lambda2: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=-80.84)
 
     def __check_init__(self):
         _checks.check_parameters("IntegratedModel", self, _POSITIVE)
@@ -166,13 +197,11 @@ class IntegratedModel(AbstractCableModel[IntegratedState]):
             strain=zero,
             impulse=zero,
             t_total=zero,
-            branch=jnp.array(1, jnp.int32),
-            force_reversal=zero,
-            force_peak=zero,
-            inst_reversal=zero,
-            tau=zero,
-            short_reversal=zero,
-            long_reversal=zero,
+            force_max=zero,
+            short=zero,
+            long=zero,
+            short_target=zero,
+            long_target=zero,
             parts=parts,
         )
 
@@ -184,52 +213,27 @@ class IntegratedModel(AbstractCableModel[IntegratedState]):
         force: Float[Array, ""],
         direction: Int[Array, ""],
     ) -> tuple[IntegratedState, StrainParts]:
-        # Written for the scan's per-sample cost: every sample runs this several times
-        # (the Newton iterations of a rate-driven test), and on a CPU its cost is
-        # mostly the number of separate array operations. So each transcendental is
-        # taken once (a decay and its complement from one expm1; one log per force
-        # ratio), parameter quotients are reciprocals XLA hoists out of the scan, and
-        # nothing depends on `dt` that need not (the Newton derivative is by `jvp`).
+        # `direction` is not used: no state of this reading depends on the sign of a
+        # force change (the class docstring says why).
+        del direction
         area = cable.area
-        branch = jnp.where(direction == 0, state.branch, direction).astype(jnp.int32)
-        reversed_ = branch != state.branch
-        loading = branch > 0
-
-        # A reversal happens at the previous sample: the new branch starts from there.
-        prev = state.parts
-        force_reversal = jnp.where(reversed_, state.force, state.force_reversal)
-        force_peak = jnp.where(reversed_ & ~loading, state.force, state.force_peak)
-        inst_reversal = jnp.where(reversed_, prev.instantaneous, state.inst_reversal)
-        short_reversal = jnp.where(reversed_, prev.recovery_short, state.short_reversal)
-        long_reversal = jnp.where(reversed_, prev.recovery_long, state.long_reversal)
-        tau = jnp.where(reversed_, 0.0, state.tau) + dt
-
-        # Trapezoid impulse (MODEL_NOTES point 5); time under tension (point 6). A
-        # step counts as under tension above 1e-4 of the breaking load, so that a
-        # load cell's noise around 0 N during an hours-long rest does not count the
-        # rest as loading (which would dilute the equivalent force I / T).
+        # Trapezoid impulse (MODEL_NOTES point 5); time under tension (point 6), a
+        # continuous ramp near 0 N so that noise around 0 N during a rest neither
+        # counts the rest as loading nor switches it on and off.
         impulse = state.impulse + 0.5 * (state.force + force) * dt
-        tensioned = jnp.maximum(state.force, force) > 1e-4 * cable.breaking_load
-        t_total = state.t_total + jnp.where(tensioned, dt, 0.0)
+        force_max = running_max(state.force_max, force)
+        t_total = state.t_total + tension_time_step(
+            state.force, force, dt, cable, force_max
+        )
 
-        # Park Eq. 1-2: (F / (E1c A))**h with the hardening exponent
-        # h = 1 + beta eps_{i-1}**gamma from the previous sample's total strain; the
-        # same h for the force where the branch began. Reloading rejoins the loading
-        # curve at the last peak (Masing-like), so the instantaneous strain is
-        # continuous at the reversal and cannot ratchet.
+        # Park Eq. 1-2 with h from the previous sample's total strain; Eq. 9's
+        # unloading line from the largest force, never below the loading curve.
         compliance_c = 1.0 / (self.E1c * area)
         h = 1.0 + self.beta * _safe_pow(jnp.maximum(state.strain, 0.0), self.gamma)
         static = _safe_pow(force * compliance_c, h)
-        static_reversal = _safe_pow(force_reversal * compliance_c, h)
-        span = force_peak - force_reversal
-        has_span = span > 0
-        weight = jnp.clip(
-            (force_peak - force) / jnp.where(has_span, span, 1.0), 0.0, 1.0
-        )
-        weight = jnp.where(has_span, weight, 0.0)
-        loading_inst = static + (inst_reversal - static_reversal) * weight
-        unloading_inst = inst_reversal - (force_reversal - force) / (self.E1r * area)
-        inst = jnp.where(loading, loading_inst, unloading_inst)
+        static_max = _safe_pow(force_max * compliance_c, h)
+        drop = force_max - force
+        inst = jnp.maximum(static_max - drop / (self.E1r * area), static)
 
         # Park Eq. 5 with MODEL_NOTES point 2: F_eq (1 - e^{-T/t_c}) / (E2c A) + I/(eta0 A).
         creep = impulse * (
@@ -237,39 +241,44 @@ class IntegratedModel(AbstractCableModel[IntegratedState]):
             + 1.0 / (self.eta0 * area)
         )
 
-        # Recoveries relax towards Park's amplitudes while unloading (Eq. 4, 7) and
-        # back towards zero while loading, from their values at the reversal:
-        # q = amplitude (1 - e^{-tau/t_r}) + q0 e^{-tau/t_r} = q0 + (amplitude - q0) g
-        # with g = 1 - e^{-tau/t_r} = -expm1(-tau/t_r) (one transcendental each).
+        # Recovery amplitudes in proportion to the drop below the largest force
+        # (Park Eq. 4 and 7 at F = 0); each recovery follows its amplitude with its
+        # retardation time, exactly for an amplitude linear over the step.
         f_eq = impulse / jnp.where(t_total > 0, t_total, 1.0)
-        t_r2 = self.retardation_time_long(cable)
-        grow_short = -jnp.expm1(-tau / self.t_r1)
-        grow_long = -jnp.expm1(-tau / t_r2)
-        amplitude_short = jnp.where(loading, 0.0, f_eq / (self.E2r * area))
-        amplitude_long = jnp.where(
-            loading, 0.0, (force_reversal - force) / (self.E3r * area)
+        # The depth's scale is at least F_on, so that before any real loading (F_m at
+        # the level of the noise) the depth stays proportional to the noise.
+        depth = drop / jnp.maximum(force_max, tension_force(cable, force_max))
+        short_target = f_eq * depth / (self.E2r * area)
+        long_target = drop / (self.E3r * area)
+        short = _retarded(state.short, state.short_target, short_target, dt, self.t_r1)
+        long = _retarded(
+            state.long,
+            state.long_target,
+            long_target,
+            dt,
+            self.retardation_time_long(cable),
         )
-        short = short_reversal + (amplitude_short - short_reversal) * grow_short
-        long = long_reversal + (amplitude_long - long_reversal) * grow_long
 
+        # The recoveries remove at most the creep that produced them.
+        recovery = short + long
+        excess = recovery > creep
+        share = jnp.where(excess, creep / jnp.where(excess, recovery, 1.0), 1.0)
         parts = StrainParts(
             instantaneous=inst,
             creep=creep,
-            recovery_short=short,
-            recovery_long=long,
+            recovery_short=short * share,
+            recovery_long=long * share,
         )
         new_state = IntegratedState(
             force=force,
             strain=parts.total,
             impulse=impulse,
             t_total=t_total,
-            branch=branch,
-            force_reversal=force_reversal,
-            force_peak=force_peak,
-            inst_reversal=inst_reversal,
-            tau=tau,
-            short_reversal=short_reversal,
-            long_reversal=long_reversal,
+            force_max=force_max,
+            short=short,
+            long=long,
+            short_target=short_target,
+            long_target=long_target,
             parts=parts,
         )
         return new_state, parts

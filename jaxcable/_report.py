@@ -13,7 +13,6 @@ from collections.abc import Sequence
 from typing import TextIO
 
 import equinox as eqx
-import jax.numpy as jnp
 import numpy as np
 
 from ._abstract import AbstractCableModel
@@ -128,8 +127,6 @@ _residuals = eqx.filter_jit(residuals)
 def model_elongations(
     result: FitResult | AbstractCableModel,
     tests: Sequence[TestData],
-    *,
-    reversal_tolerance: float = 0.0,
 ) -> list[np.ndarray]:
     """The fitted model's elongation (m) at every sample of every test, masked samples
     included, in one vmapped simulation.
@@ -139,7 +136,6 @@ def model_elongations(
     - `result`: a [`jaxcable.FitResult`][] of these `tests` (per-test parameters are
         matched by position), or a model.
     - `tests`: the tests, as fitted.
-    - `reversal_tolerance`: as given to the fit, N.
 
     **Returns:**
 
@@ -158,15 +154,7 @@ def model_elongations(
     padded = pad_tests(unmasked)
     model = result.model if isinstance(result, FitResult) else result
     params, static = eqx.partition(model, eqx.is_inexact_array)
-    r = np.asarray(
-        # An array, not a float: filter_jit would recompile for every new value.
-        _residuals(
-            params,
-            static,
-            padded,
-            reversal_tolerance=jnp.asarray(reversal_tolerance, padded.time.dtype),
-        )
-    )
+    r = np.asarray(_residuals(params, static, padded))
     return [r[i, : t.num_samples] + t.elongation for i, t in enumerate(unmasked)]
 
 
@@ -367,7 +355,6 @@ def write_report(
     result: FitResult,
     tests: Sequence[TestData],
     *,
-    reversal_tolerance: float = 0.0,
     title: str = "jaxcable fit",
     notes: Sequence[str] = (),
     progress: bool = False,
@@ -385,7 +372,7 @@ def write_report(
     """
     out.mkdir(parents=True, exist_ok=True)
     with Progress("report", 3, enabled=progress) as bar:
-        model = model_elongations(result, tests, reversal_tolerance=reversal_tolerance)
+        model = model_elongations(result, tests)
         bar.advance(note="simulated")
         loops, resid = out / "fit_loops.png", out / "fit_residuals.png"
         plot_loops(loops, result, tests, model)

@@ -127,8 +127,12 @@ def _commit(
     mask,
 ) -> tuple[CableState, Any]:
     strain = parts.total
+    # A non-finite strain is reported only when the step had no cause of its own (a
+    # time going backwards, a negative force), which is the more useful message.
     step_result = RESULTS.where(
-        jnp.isfinite(strain), step_result, RESULTS.nonphysical_strain
+        jnp.isfinite(strain) | (step_result != RESULTS.successful),
+        step_result,
+        RESULTS.nonphysical_strain,
     )
     new = CableState(
         model_state=model_state,
@@ -159,14 +163,15 @@ def step(
     state: CableState,
     time: Float[ArrayLike, ""],
     force: Float[ArrayLike, ""],
-    *,
-    reversal_tolerance: float = 0.0,
 ) -> tuple[CableState, StrainParts]:
     """Advance one cable by one time-stamped force sample (no solve).
 
     A pure function for a user's own `lax.scan`, a controller, `jit`, `vmap` or
-    `grad`. The branch (loading/unloading) follows the sign of the force change; a
-    change smaller than `reversal_tolerance` (N) keeps the current branch.
+    `grad`. The force is linear between samples; the model is told the sign of the
+    force change (`direction`). Every entry point that takes a force history
+    ([`jaxcable.simulate_force_history`][], [`jaxcable.fit`][],
+    [`jaxcable.controller_step`][], [`jaxcable.monte_carlo`][]) is this step in a
+    scan, so all of them give the same elongations for the same history.
 
     **Arguments:**
 
@@ -183,21 +188,18 @@ def step(
     """
     time = jnp.asarray(time, state.time.dtype)
     force = jnp.asarray(force, state.force.dtype)
-    new, parts = _force_step(
-        model, cable, state, time, force, jnp.array(True), reversal_tolerance
-    )
+    new, parts = _force_step(model, cable, state, time, force, jnp.array(True))
     return new, parts
 
 
-def _direction(delta, tolerance) -> Int[Array, ""]:
-    return jnp.where(delta > tolerance, 1, jnp.where(delta < -tolerance, -1, 0)).astype(
-        jnp.int32
-    )
+def _direction(delta) -> Int[Array, ""]:
+    # No threshold: a threshold is a discontinuity in the force history (issue 10).
+    return jnp.where(delta > 0, 1, jnp.where(delta < 0, -1, 0)).astype(jnp.int32)
 
 
-def _force_step(model, cable, carry: CableState, time, force, mask, tolerance):
+def _force_step(model, cable, carry: CableState, time, force, mask):
     dt = time - carry.time
-    direction = _direction(force - carry.force, tolerance)
+    direction = _direction(force - carry.force)
     model_state, parts = model.advance(carry.model_state, cable, dt, force, direction)
     ok = (dt >= 0) & jnp.isfinite(dt)
     step_result = RESULTS.where(ok, RESULTS.successful, RESULTS.nonphysical_time)
@@ -283,13 +285,13 @@ def _trajectory(cable, outs, parts, result, throw) -> Trajectory:
 
 
 @eqx.filter_jit
-def _force_kernel(model, cable, time, force, mask, tolerance, throw, checkpoint):
+def _force_kernel(model, cable, time, force, mask, throw, checkpoint):
     TRACE_COUNTS["force"] += 1
     carry = init_state(model, cable, time[0])
 
     def body(carry, x):
         t, f, m = x
-        new, parts = _force_step(model, cable, carry, t, f, m, tolerance)
+        new, parts = _force_step(model, cable, carry, t, f, m)
         return new, (new, m, parts)
 
     final, (states, masks, parts) = _scan(
@@ -305,15 +307,17 @@ def simulate_force_history(
     force: Float[ArrayLike, " samples"],
     *,
     mask: Bool[ArrayLike, " samples"] | None = None,
-    reversal_tolerance: float = 0.0,
     throw: bool = True,
     checkpoint: int | None = None,
 ) -> Trajectory:
     """Simulate a time-stamped force history, as a robot logs it.
 
-    The force is linear between samples; the branch follows the sign of the force
-    change. The first sample is the initial condition reached from the unloaded cable
-    at `time[0]` (a nonzero `force[0]` is applied instantly).
+    The force is linear between samples; the model is told the sign of each force
+    change, with no threshold. The forces are used as given, with no deadband or
+    smoothing, here as in every other entry point ([`jaxcable.step`][]): the same
+    history gives the same elongations everywhere. The first sample is the initial
+    condition reached from the unloaded cable at `time[0]` (a nonzero `force[0]` is
+    applied instantly).
 
     **Arguments:**
 
@@ -323,7 +327,6 @@ def simulate_force_history(
     - `force`: cable force at each sample, N, 0 <= force <= `cable.breaking_load`.
     - `mask`: optional, False marks padding samples (histories of different lengths
         in one vmapped batch); they leave the state unchanged.
-    - `reversal_tolerance`: a force change smaller than this (N) keeps the branch.
     - `throw`: raise on failure (default). With `throw=False` the failure is returned
         in `Trajectory.result` (per cable under vmap).
     - `checkpoint`: optional block length (samples) of a checkpointed scan, for the
@@ -334,9 +337,7 @@ def simulate_force_history(
     A [`jaxcable.Trajectory`][].
     """
     time, force, mask = _check_history(cable, time, force, mask, "force")
-    return _force_kernel(
-        model, cable, time, force, mask, reversal_tolerance, throw, checkpoint
-    )
+    return _force_kernel(model, cable, time, force, mask, throw, checkpoint)
 
 
 def _check_history(cable, time, x, mask, xname):
@@ -551,7 +552,7 @@ def _elongation_step(model, cable, carry: CableState, x, solver):
     time, elongation, mask = x
     target = elongation / cable.length
     dt = time - carry.time
-    direction = _direction(target - carry.strain, 0.0)
+    direction = _direction(target - carry.strain)
     problem = _ForceProblem(model, cable, carry, dt, target, direction)
     # Slack: an imposed length below the zero-force length leaves the cable unloaded.
     zero = jnp.zeros_like(target)

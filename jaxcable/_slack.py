@@ -127,32 +127,6 @@ class SlackReport:
         return "; ".join(parts)
 
 
-# The default reversal tolerance of a fit to measured forces, in force-noise standard
-# deviations. Two consecutive samples of a held force differ by noise of sqrt(2)
-# sigma; at 3 sigma about one sample in 30 of a long hold flipped Park's model onto its
-# unloading law and back (measured: fits of noise-free models to data with 0.05 N of
-# force noise then ended 3-70x above the elongation noise); at 8 sigma (5.7 sigma of
-# a difference) none do, and the branch is lost only for real reversals under 8 sigma.
-REVERSAL_NOISE_FACTOR = 8.0
-
-
-def reversal_tolerance(forces) -> float:
-    """The default reversal tolerance for measured force records, N:
-    `REVERSAL_NOISE_FACTOR` times the largest robust force noise among them.
-
-    **Arguments:**
-
-    - `forces`: the force records (arrays, N).
-
-    **Returns:**
-
-    The tolerance, N (0 for noise-free forces).
-    """
-    return REVERSAL_NOISE_FACTOR * max(
-        (force_noise(np.asarray(f, float)) for f in forces), default=0.0
-    )
-
-
 def force_noise(force: np.ndarray) -> float:
     """Robust standard deviation of the force noise, N.
 

@@ -228,26 +228,53 @@ def test_temperature_reduced_time_and_hotter_creeps_faster():
 
 
 def test_hereditary_ramp_matches_exact_superposition():
-    # MODEL_NOTES point 4: under F = k t the Kelvin-Voigt term is exactly
-    # k [t - t_c (1 - exp(-t / t_c))] / (E2c A) when w = 1.
-    k = 0.5  # N/s
+    # MODEL_NOTES point 4: under F = F0 + k t (F0 applied at t = 0) the Kelvin-Voigt
+    # term is exactly [F0 (1 - e) + k (t - t_c (1 - e))] / (E2c A), e = exp(-t / t_c),
+    # when w = 1. F0 = 1 N is above the 0.2 N where the tension clock ramps in
+    # (`jaxcable._memory.tension_weight`), so the clock is the real time (from 0 N a
+    # ramp would count its first F_on / k seconds in part).
+    k, f0 = 0.5, 1.0  # N/s, N
     time = jnp.linspace(0.0, 200.0, TIME.shape[0])
-    force = k * time
+    force = f0 + k * time
     ext = _simulate(Hereditary(BASE, weight=1.0), CABLE, time, force)
     area = CABLE.area
     t = np.asarray(time)
-    impulse = 0.5 * k * t**2
+    impulse = f0 * t + 0.5 * k * t**2
     dashpot = impulse / (float(BASE.eta0) * area)
     kelvin_voigt = np.asarray(ext.parts.creep) - dashpot
     t_c, E2c = float(BASE.t_c), float(BASE.E2c)
-    exact = k * (t - t_c * -np.expm1(-t / t_c)) / (E2c * area)
+    relaxed = -np.expm1(-t / t_c)
+    exact = (f0 * relaxed + k * (t - t_c * relaxed)) / (E2c * area)
     np.testing.assert_allclose(kelvin_voigt[1:], exact[1:], rtol=1e-9)
-    # and the base's equivalent-force term is (k t / 2)(1 - exp(-t / t_c)) / (E2c A)
+    # and the base's equivalent-force term is (I / t)(1 - exp(-t / t_c)) / (E2c A)
     base = _simulate(BASE, CABLE, time, force)
-    equivalent = 0.5 * k * t * -np.expm1(-t / t_c) / (E2c * area)
+    equivalent = impulse[1:] / t[1:] * relaxed[1:] / (E2c * area)
     np.testing.assert_allclose(
-        np.asarray(base.parts.creep)[1:] - dashpot[1:], equivalent[1:], rtol=1e-9
+        np.asarray(base.parts.creep)[1:] - dashpot[1:], equivalent, rtol=1e-9
     )
+
+
+def test_hereditary_runs_on_the_base_clock():
+    """Regression (issue 10): the clock of the exact Kelvin-Voigt term is the base's
+    continuous tension clock. A rest held at exactly the old switching force (1e-4 of
+    the breaking load, 0.2 N) with +-1e-9 N of noise switched whole steps of
+    relaxation on and off; now the strain moves by a multiple of the noise."""
+    n = TIME.shape[0]
+    f_old = 1e-4 * float(CABLE.breaking_load)  # the old switch
+    time = jnp.asarray(
+        np.concatenate([[0.0, 100.0, 400.0, 500.0], 500 + 20.0 * np.arange(1, n - 3)])
+    )
+    clean = np.concatenate([[0.0, 100.0, 100.0, f_old], np.full(n - 4, f_old)])
+    noise = 1e-9 * (-1.0) ** np.arange(n)
+    noise[:4] = 0.0
+    model = Hereditary(BASE, weight=1.0)
+    a = _simulate(model, CABLE, time, jnp.asarray(clean))
+    b = _simulate(model, CABLE, time, jnp.asarray(clean + noise))
+    # The clock moves by at most (rest length) d / F_on ~ 1500 s x 1e-9 N / 10 N (F_on
+    # is >= 0.2 N, here a tenth of the 100 N peak), and the strain by that times
+    # (Kelvin-Voigt strain) / t_c ~ 3e-3 / 8.6 s: ~5e-11 (bound 1e-6). The old switch
+    # relaxed the whole rest: ~3e-3.
+    assert np.max(np.abs(np.asarray(a.strain - b.strain))) < 1e-9 * 1e3
 
 
 def test_stress_nonlinear_creep_power_law():
@@ -272,6 +299,36 @@ def test_stress_nonlinear_creep_power_law():
         (gain - 1) * (creep[step + 1 :] - creep[step]),
         rtol=1e-9,
     )
+
+
+def test_stress_nonlinear_creep_no_drift_when_the_base_creep_is_stationary():
+    """Regression (issue 10): each creep increment was scaled by g when positive and
+    by the extra/creep share when negative. Where the base creep is stationary, force
+    noise flips the sign of every increment, and the extra creep drifted with the
+    total variation of the noise (towards (g - 1) creep). Now it follows the base
+    creep's running maximum: no drift."""
+    n, E_k, tau_k, d = 0.5, 1e10, 10.0, 1e-3
+    hooke = jc.HookeModel()
+    model = StressNonlinearCreep(SecondRetardation(hooke, E_k, tau_k), n=n)
+    # 200 N until the element is relaxed, then 150 N (the base creep recovers to
+    # its 150 N value and stays there), with +-d alternating noise from t = 600 s.
+    time = jnp.linspace(0.0, 4000.0, 400)
+    clean = jnp.where(time < 300.0, 200.0, 150.0)
+    noise = d * (-1.0) ** jnp.arange(time.shape[0]) * (time > 600.0)
+    a = _simulate(model, CABLE, time, clean)
+    b = _simulate(model, CABLE, time, clean + noise)
+    # The spring moves by d / (A E), the base creep (a Kelvin-Voigt strain) by
+    # <= d / (A E_k), the extra creep by (X / M) = g(200 N) - 1 times that. The old
+    # reading drifted to ~1.6 times this bound over these 340 noisy samples.
+    g_max = (200.0 / CABLE.area / model.stress_ref) ** n
+    bound = d / CABLE.area * (1 / hooke.E + g_max / E_k)
+    assert np.max(np.abs(np.asarray(a.strain - b.strain))) < bound
+    # Below its largest value the extra creep follows the base creep at the
+    # proportion it was laid down with, X / M = g(200 N) - 1.
+    creep = np.asarray(_simulate(model.base, CABLE, time, clean).parts.creep)
+    extra = np.asarray(a.parts.creep) - creep
+    late = np.asarray(time) > 400.0
+    np.testing.assert_allclose(extra[late] / creep[late], g_max - 1.0, rtol=1e-3)
 
 
 def test_hereditary_rejects_linear_bases():

@@ -13,17 +13,17 @@ from jaxcable import _sk78
 
 # Errors (%) of the default set, as measured when it was fitted (samples_per_ramp=200).
 MEASURED_ERRORS = {
-    "creep_ratio_300mm": -0.05,
-    "residual_300mm": 0.22,
-    "residual_100mm": 0.72,
-    "recovery_100mm_24h": 3.04,
-    "recovery_100mm_48h": 3.08,
-    "recovery_100mm_72h": 1.77,
-    "recovery_300mm_24h": -2.26,
-    "recovery_300mm_48h": 4.13,
-    "recovery_300mm_72h": -4.44,
-    "peak_300mm_50mm_min": 0.05,
-    "peak_300mm_3mm_min": -1.13,
+    "creep_ratio_300mm": -0.25,
+    "residual_300mm": 1.20,
+    "residual_100mm": 0.78,
+    "recovery_100mm_24h": 3.13,
+    "recovery_100mm_48h": 3.17,
+    "recovery_100mm_72h": 1.86,
+    "recovery_300mm_24h": -2.37,
+    "recovery_300mm_48h": 4.17,
+    "recovery_300mm_72h": -4.49,
+    "peak_300mm_50mm_min": 0.04,
+    "peak_300mm_3mm_min": -2.15,
 }
 # Targets the model cannot reach within 5 % (none reached at present).
 MISSED = set()

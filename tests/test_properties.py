@@ -105,3 +105,33 @@ def test_strain_scales_with_nothing_but_force_for_hooke(length, force):
         force * length / (jc.HookeModel().E * cable.area),
         rtol=1e-12,
     )
+
+
+# Random histories with rests: blocks of (duration, force) with the force linear within a
+# block and blocks at 0 N (rests) of up to 3 days, on the scaled parameter sets above.
+blocks = st.lists(
+    st.tuples(
+        st.floats(1.0, 3 * 86400.0),
+        st.one_of(st.just(0.0), st.floats(0.0, 200.0)),
+    ),
+    min_size=N - 1,
+    max_size=N - 1,
+)
+
+
+@SETTINGS
+@given(log_scales, blocks)
+def test_never_shorter_than_new_nor_than_the_set(scales, history):
+    # Issue 10: the recoveries are bounded by the creep that produced them, as a
+    # property of the model (any parameters near the defaults, any history): the
+    # strain never falls below the instantaneous set, itself >= 0.
+    model = _perturbed(scales)
+    dts, forces = zip(*history)
+    time = _times(dts)
+    force = np.concatenate([[0.0], forces])
+    traj = _force_strain(model, time, force)
+    assert traj.result == jc.RESULTS.successful
+    strain = np.asarray(traj.strain)
+    rounding = 1e-12 * np.asarray(traj.creep)  # creep - its recovered share, rounded
+    assert np.all(strain >= -rounding)
+    assert np.all(strain >= np.asarray(traj.instantaneous) - rounding)
