@@ -18,7 +18,10 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
-	$(BIN)/pytest -q
+	# Two processes: late in one long process XLA's CPU compiler crashed (SIGSEGV,
+	# SIGABRT) on a fresh clone; each half alone passes.
+	$(BIN)/pytest -q $(wildcard tests/test_[a-m]*.py)
+	$(BIN)/pytest -q $(wildcard tests/test_[n-z]*.py)
 
 lint: $(STAMP)
 	$(BIN)/ruff check .
