@@ -42,22 +42,22 @@ PARAMETERS = (
     "lambda1",
     "lambda2",
 )
-# As jaxcable._simulate: residual = strain error / (|strain at the start of the step|
+# As jaxcable._drive.simulate: residual = strain error / (|strain at the start of the step|
 # + |crosshead strain at the guessed end| + floor).
 _STRAIN_FLOOR = 1e-4
 
 
-# As jaxcable._memory: time counts as under tension in proportion to the force below
+# As jaxcable._models.kernels: time counts as under tension in proportion to the force below
 # F_on = max(this share of the breaking load, this fraction of the largest force).
 _TENSION_SHARE = 1e-4
 _TENSION_FRACTION = 0.1
-# As jaxcable._five_element._ramp_factor: its Taylor series below this x.
+# As jaxcable._models.kernels.ramp_factor: its Taylor series below this x.
 _SERIES_BELOW = 0.1
 
 
 def _tension_share(f0, f1, f_on):
     """Mean of min(F / F_on, 1) (0 below 0 N) over a step with the force linear from
-    f0 to f1 (as jaxcable._memory.tension_time_step: the chord of its primitive,
+    f0 to f1 (as jaxcable._models.kernels.tension_time_step: the chord of its primitive,
     the value at the mean force below a change of 1e-6 F_on)."""
 
     def primitive(f):
@@ -89,7 +89,7 @@ def _ramp_factor(x):
 
 
 def _retarded(q0, target0, target1, dt, tau):
-    """As jaxcable._integrated._retarded: q' = (target - q) / tau over dt with the
+    """As jaxcable._models.kernels.retarded: q' = (target - q) / tau over dt with the
     target linear from target0 to target1, exactly; and its dt-derivative for a
     fixed target1 (the caller adds d target1 / d dt times the ramp factor)."""
     x = dt / tau
@@ -197,7 +197,7 @@ def simulate_rate_test_numpy(
         d_impulse = 0.5 * (force_prev + F)
         # Time under tension per second of the step: the mean over the step of
         # min(F / F_on, 1) for the force linear over the step, F_on at the step's
-        # largest force so far (as jaxcable._memory).
+        # largest force so far (as jaxcable._models.kernels).
         d_ttotal = _tension_share(
             force_prev, F, np.maximum(f_on, _TENSION_FRACTION * f_max)
         )

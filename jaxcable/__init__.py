@@ -1,15 +1,59 @@
 import importlib.metadata
 
-from ._abstract import (
-    AbstractCableModel as AbstractCableModel,
-    StrainParts as StrainParts,
+from ._cable import Cable as Cable
+from ._diagnose.diagnose import (
+    Candidate as Candidate,
+    Diagnosis as Diagnosis,
+    diagnose as diagnose,
+    residual_structure as residual_structure,
+    write_diagnosis_report as write_diagnosis_report,
 )
-from ._analysis import (
+from ._drive.analysis import (
     loop_energies as loop_energies,
     secant_stiffness as secant_stiffness,
     split_cycles as split_cycles,
 )
-from ._baselines import (
+from ._drive.controller import (
+    ControllerState as ControllerState,
+    LiveFiveElement as LiveFiveElement,
+    controller_init as controller_init,
+    controller_step as controller_step,
+)
+from ._drive.newton import Newton as Newton
+from ._drive.protocol import Protocol as Protocol
+from ._drive.simulate import (
+    CableState as CableState,
+    Trajectory as Trajectory,
+    init_state as init_state,
+    simulate_elongation_history as simulate_elongation_history,
+    simulate_force_history as simulate_force_history,
+    simulate_rate_test as simulate_rate_test,
+    step as step,
+)
+from ._fit.fit import (
+    FitResult as FitResult,
+    IdentifiabilityWarning as IdentifiabilityWarning,
+    PaddedTests as PaddedTests,
+    fit as fit,
+    make_loss as make_loss,
+    pad_tests as pad_tests,
+    residuals as residuals,
+)
+from ._io.readers import (
+    SlackReport as SlackReport,
+    SlackStretch as SlackStretch,
+    Test as Test,
+    TestData as TestData,
+    mask_slack as mask_slack,
+    read_csv as read_csv,
+    read_test as read_test,
+    write_csv as write_csv,
+)
+from ._models.base import (
+    AbstractCableModel as AbstractCableModel,
+    StrainParts as StrainParts,
+)
+from ._models.baselines import (
     BoucWenModel as BoucWenModel,
     BoucWenState as BoucWenState,
     BurgersModel as BurgersModel,
@@ -17,34 +61,7 @@ from ._baselines import (
     HookeModel as HookeModel,
     HookeState as HookeState,
 )
-from ._cable import Cable as Cable
-from ._cdpr import (
-    Robot as Robot,
-    RobotRun as RobotRun,
-    Scenario as Scenario,
-    errors_and_jacobian as errors_and_jacobian,
-    forward_kinematics as forward_kinematics,
-    pick_and_place as pick_and_place,
-    position_loss as position_loss,
-    real_cables as real_cables,
-    simulate_robot as simulate_robot,
-    tension_distribution as tension_distribution,
-    tune_gain as tune_gain,
-)
-from ._controller import (
-    ControllerState as ControllerState,
-    LiveFiveElement as LiveFiveElement,
-    controller_init as controller_init,
-    controller_step as controller_step,
-)
-from ._diagnose import (
-    Candidate as Candidate,
-    Diagnosis as Diagnosis,
-    diagnose as diagnose,
-    residual_structure as residual_structure,
-    write_diagnosis_report as write_diagnosis_report,
-)
-from ._extensions import (
+from ._models.extensions import (
     EXTENSIONS as EXTENSIONS,
     BeddingIn as BeddingIn,
     BeddingInState as BeddingInState,
@@ -62,34 +79,20 @@ from ._extensions import (
     log_shift_arrhenius as log_shift_arrhenius,
     log_shift_wlf as log_shift_wlf,
 )
-from ._fit import (
-    FitResult as FitResult,
-    IdentifiabilityWarning as IdentifiabilityWarning,
-    PaddedTests as PaddedTests,
-    fit as fit,
-    make_loss as make_loss,
-    pad_tests as pad_tests,
-    residuals as residuals,
-)
-from ._five_element import (
-    FiveElementModel as FiveElementModel,
-    FiveElementState as FiveElementState,
-)
-from ._integrated import (
+from ._models.park import (
     IntegratedModel as IntegratedModel,
     IntegratedState as IntegratedState,
 )
-from ._io import (
-    SlackReport as SlackReport,
-    SlackStretch as SlackStretch,
-    Test as Test,
-    TestData as TestData,
-    mask_slack as mask_slack,
-    read_csv as read_csv,
-    read_test as read_test,
-    write_csv as write_csv,
+from ._models.piao import (
+    FiveElementModel as FiveElementModel,
+    FiveElementState as FiveElementState,
 )
-from ._montecarlo import (
+from ._models.piao_surface import (
+    PIAO_TABLE3 as PIAO_TABLE3,
+    ParameterSurface as ParameterSurface,
+    piao_five_element as piao_five_element,
+)
+from ._montecarlo.montecarlo import (
     AbstractDistribution as AbstractDistribution,
     AbstractParameterSampler as AbstractParameterSampler,
     CorrelatedParameters as CorrelatedParameters,
@@ -101,32 +104,29 @@ from ._montecarlo import (
     Uniform as Uniform,
     monte_carlo as monte_carlo,
 )
-from ._newton import Newton as Newton
-from ._protocol import Protocol as Protocol
-from ._results import RESULTS as RESULTS
-from ._simulate import (
-    CableState as CableState,
-    Trajectory as Trajectory,
-    init_state as init_state,
-    simulate_elongation_history as simulate_elongation_history,
-    simulate_force_history as simulate_force_history,
-    simulate_rate_test as simulate_rate_test,
-    step as step,
-)
-from ._sk78 import (
+from ._papers.park import (
     SK78_TARGETS as SK78_TARGETS,
     calibrate_sk78 as calibrate_sk78,
     sk78_qualitative_checks as sk78_qualitative_checks,
     sk78_targets_report as sk78_targets_report,
 )
-from ._surface import (
-    PIAO_TABLE3 as PIAO_TABLE3,
-    ParameterSurface as ParameterSurface,
-    piao_five_element as piao_five_element,
-)
-from ._synthetic import (
+from ._papers.synthetic import (
     hidden_effect_dataset as hidden_effect_dataset,
     hidden_effect_model as hidden_effect_model,
+)
+from ._results import RESULTS as RESULTS
+from .cdpr.robot import (
+    Robot as Robot,
+    RobotRun as RobotRun,
+    Scenario as Scenario,
+    errors_and_jacobian as errors_and_jacobian,
+    forward_kinematics as forward_kinematics,
+    pick_and_place as pick_and_place,
+    position_loss as position_loss,
+    real_cables as real_cables,
+    simulate_robot as simulate_robot,
+    tension_distribution as tension_distribution,
+    tune_gain as tune_gain,
 )
 
 

@@ -5,8 +5,8 @@ import pytest
 
 import jaxcable as jc
 from jaxcable import _cdpr as cdpr
-from jaxcable._controller import GRAVITY
-from jaxcable._extensions import TerminationCompliance
+from jaxcable._drive.controller import GRAVITY
+from jaxcable._models.extensions import TerminationCompliance
 
 
 ROBOT = cdpr.Robot()

@@ -20,7 +20,7 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 import jaxcable as jc
-from jaxcable._extensions import (
+from jaxcable._models.extensions import (
     BeddingIn,
     Hereditary,
     SecondRetardation,
@@ -36,7 +36,7 @@ N = 400
 CABLE = jc.Cable(length=0.3)  # Park's 3 mm cable
 HOT = jc.Cable(length=0.3, temperature=313.15)  # 20 K above T_ref: a_T != 1
 AREA = float(CABLE.area)
-# jaxcable._memory: the tension clock counts time at F < F_on by F / F_on, F_on =
+# jaxcable._models.kernels: the tension clock counts time at F < F_on by F / F_on, F_on =
 # max(F_FLOOR, a tenth of the largest force so far); F_FLOOR was the old clock's switch.
 F_FLOOR = 1e-4 * float(CABLE.breaking_load)
 NOISE = (1e-6, 1e-3, 1.0)  # N
@@ -115,7 +115,7 @@ def _clock_change(time, force, d):
 
 
 def _clock(time, force):
-    """The clean time under tension, s (jaxcable._memory.tension_time_step: the
+    """The clean time under tension, s (jaxcable._models.kernels.tension_time_step: the
     exact integral of min(F / F_on, 1) over each step, F_on at the step's end)."""
     f_on = _f_on(force)[1:]
 

@@ -5,13 +5,13 @@ import numpy as np
 import pytest
 
 import jaxcable as jc
-from jaxcable._controller import (
+from jaxcable._drive.controller import (
     ControllerState,
     LiveFiveElement,
     controller_init,
     controller_step,
 )
-from jaxcable._extensions import TerminationCompliance
+from jaxcable._models.extensions import TerminationCompliance
 
 from .helpers import tree_allclose
 

@@ -11,8 +11,8 @@ import pytest
 
 import jaxcable as jc
 from jaxcable import _synthetic
-from jaxcable._cli import main
-from jaxcable._diagnose import heldout_rmse, noise_level, residual_structure
+from jaxcable._cli.main import main
+from jaxcable._diagnose.diagnose import heldout_rmse, noise_level, residual_structure
 
 
 @pytest.fixture(scope="module")

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import jaxcable
-from jaxcable._five_element import kelvin_voigt_step
+from jaxcable._models.kernels import kelvin_voigt_step
 
 
 FIELDS = (

@@ -31,7 +31,7 @@ def test_constant_load_reduces_to_burgers_eq3():
 
 def _reference_ramp(model, cable, forces):
     """Dense NumPy reference of Park Eq. 5 = Eq. 6 on one loading ramp (brentq), with
-    time under tension counted as the model documents (`jaxcable._memory`)."""
+    time under tension counted as the model documents (`jaxcable._models.kernels`)."""
     area = float(cable.area)
     f_on = 1e-4 * float(cable.breaking_load)
 

@@ -71,7 +71,7 @@ def test_cyclic_behaviour():
 
 
 def test_default_set_is_physical():
-    # The constraints of the fit (jaxcable._sk78): h = 1 + beta eps**gamma is
+    # The constraints of the fit (jaxcable._papers.park): h = 1 + beta eps**gamma is
     # differentiable at eps = 0; the unloading is stiffer than the hardened loading
     # secant (instantaneous set >= 0 in every cycle to 100 N or more, strain <= 10 %);
     # the short-term recovery is slower than Park's slowest crosshead.
@@ -106,7 +106,7 @@ def test_park_protocol_simulates(length, rate_mm_per_min, force):
     # Park's protocol (10 cycles, a rest, the re-stretch) at his lengths, rates and
     # forces: the re-stretch passes through the strain at which h = 1 + beta
     # eps**gamma starts, and must still have a loading time for every force sample.
-    from jaxcable._synthetic import park_protocol
+    from jaxcable._papers.synthetic import park_protocol
 
     cable = jc.Cable(length=length, speed=rate_mm_per_min * 1e-3 / 60)
     for rest_hours in (24.0, 48.0, 72.0):

@@ -28,19 +28,21 @@ import jax.tree_util as jtu
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float, PRNGKeyArray
 
-from ._abstract import AbstractCableModel
-from ._baselines import HookeModel
-from ._cable import Cable
-from ._controller import (
+from .._cable import Cable
+from .._drive import (
     GRAVITY,
     ControllerState,
     LiveFiveElement,
     controller_init,
     controller_step,
 )
-from ._extensions import TerminationCompliance
-from ._integrated import IntegratedModel
-from ._montecarlo import IndependentParameters, LogNormal
+from .._models import (
+    AbstractCableModel,
+    HookeModel,
+    IntegratedModel,
+    TerminationCompliance,
+)
+from .._montecarlo import IndependentParameters, LogNormal
 
 
 # Piao Section 2.1: LIROS D-Pro 01505-0600, 6 mm. Its breaking load is not printed; it

@@ -4,11 +4,10 @@ measurement noise. Used for the bundled data set (`jaxcable/data/`, made by
 
 import numpy as np
 
-from ._abstract import AbstractCableModel
-from ._cable import Cable
-from ._io import TestData
-from ._protocol import Protocol
-from ._simulate import simulate_rate_test
+from .._cable import Cable
+from .._drive import Protocol, simulate_rate_test
+from .._io import TestData
+from .._models import AbstractCableModel
 
 
 def park_protocol(
@@ -120,8 +119,7 @@ def bundled_dataset(seed: int = 20261121) -> list[TestData]:
 
     A list of eight [`jaxcable.TestData`][] with an `id` in their metadata.
     """
-    from ._extensions import TerminationCompliance
-    from ._integrated import IntegratedModel
+    from .._models import IntegratedModel, TerminationCompliance
 
     model = TerminationCompliance(IntegratedModel(), compliance=BUNDLED_COMPLIANCE)
     tests = []
@@ -243,8 +241,7 @@ def hidden_effect_model(
     unwrapped for `effect=None`."""
     import equinox as eqx
 
-    from ._extensions import EXTENSIONS
-    from ._integrated import IntegratedModel
+    from .._models import EXTENSIONS, IntegratedModel
 
     if effect is not None and effect not in EXTENSIONS:
         raise ValueError(

@@ -29,9 +29,9 @@ from typing import NamedTuple
 
 import numpy as np
 
-from . import _slack
-from ._cable import ZERO_CELSIUS, Cable
-from ._slack import SlackReport as SlackReport, SlackStretch as SlackStretch
+from .._cable import ZERO_CELSIUS, Cable
+from . import slack as _slack
+from .slack import SlackReport as SlackReport, SlackStretch as SlackStretch
 
 
 DEFAULT_DIAMETER_MM = 3.0

@@ -10,12 +10,12 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int
 
-from . import _checks
-from ._abstract import AbstractCableModel, StrainParts, positive_result
-from ._cable import Cable
-from ._five_element import check_parameters, kelvin_voigt_step
-from ._memory import loading_weight, play
-from ._results import RESULTS
+from .. import _checks
+from .._cable import Cable
+from .._checks import check_parameters
+from .._results import RESULTS
+from .base import AbstractCableModel, StrainParts, positive_result
+from .kernels import kelvin_voigt_step, loading_weight, play
 
 
 # ----------------------------------------------------------------------------------

@@ -16,13 +16,19 @@ import jax.tree_util as jtu
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float, Int
 
-from . import _checks
-from ._abstract import AbstractCableModel, StrainParts
-from ._cable import Cable
-from ._five_element import FiveElementModel, FiveElementState
-from ._results import RESULTS
-from ._simulate import CableState, init_state, step
-from ._surface import _PIAO_TABLE1, PIAO_TABLE3, ParameterSurface
+from .. import _checks
+from .._cable import Cable
+from .._models import (
+    PIAO_TABLE1,
+    PIAO_TABLE3,
+    AbstractCableModel,
+    FiveElementModel,
+    FiveElementState,
+    ParameterSurface,
+    StrainParts,
+)
+from .._results import RESULTS
+from .simulate import CableState, init_state, step
 
 
 GRAVITY = 9.80665  # m/s^2, standard gravity
@@ -60,16 +66,16 @@ class LiveFiveElement(AbstractCableModel[FiveElementState]):
     surface: ParameterSurface = PIAO_TABLE3
     gravity: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=GRAVITY)
     E_L2: Float[Array, ""] = eqx.field(
-        converter=jnp.asarray, default=_PIAO_TABLE1["E_L2"]
+        converter=jnp.asarray, default=PIAO_TABLE1["E_L2"]
     )
     E_L3: Float[Array, ""] = eqx.field(
-        converter=jnp.asarray, default=_PIAO_TABLE1["E_L3"]
+        converter=jnp.asarray, default=PIAO_TABLE1["E_L3"]
     )
     eta_L2: Float[Array, ""] = eqx.field(
-        converter=jnp.asarray, default=_PIAO_TABLE1["eta_L2"]
+        converter=jnp.asarray, default=PIAO_TABLE1["eta_L2"]
     )
     eta_L3: Float[Array, ""] = eqx.field(
-        converter=jnp.asarray, default=_PIAO_TABLE1["eta_L3"]
+        converter=jnp.asarray, default=PIAO_TABLE1["eta_L3"]
     )
 
     def __check_init__(self):

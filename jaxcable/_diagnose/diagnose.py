@@ -29,11 +29,9 @@ from typing import Any, Literal
 
 import numpy as np
 
-from ._abstract import AbstractCableModel
-from ._extensions import EXTENSIONS
-from ._fit import FitResult, IdentifiabilityWarning, _as_test_list, _test_id, fit
-from ._integrated import IntegratedModel
-from ._report import _grid, _time_axis, model_elongations
+from .._fit import FitResult, IdentifiabilityWarning, as_test_list, fit, test_id
+from .._models import EXTENSIONS, AbstractCableModel, IntegratedModel
+from .._report import _grid, _time_axis, model_elongations
 
 
 # The base parameters refitted by default. Park's hardening (beta, gamma) and the
@@ -316,7 +314,7 @@ def heldout_rmse(
 
     The pooled RMSE over all held-out samples, mm.
     """
-    tests = _as_test_list(tests)
+    tests = as_test_list(tests)
     _, held = _time_split(tests, holdout)
     e = model_elongations(model, held)
     sq = sum(float(np.sum((x - t.elongation)[t.mask] ** 2)) for t, x in zip(held, e))
@@ -331,7 +329,7 @@ def noise_level(tests) -> float:
     dense samples is far smaller and the median ignores the reversals), the median
     over tests."""
     values = []
-    for t in _as_test_list(tests):
+    for t in as_test_list(tests):
         e = np.asarray(t.elongation, float)
         if e.size >= 5:
             d2 = np.diff(e, 2)
@@ -393,7 +391,7 @@ def residual_structure(tests, residual: Sequence[np.ndarray]) -> dict[str, Any]:
     {"loading", "unloading", "hold"}: mean residual on each branch, mm}`. Features
     constant over the data (one length, one temperature) have no correlation (None).
     """
-    tests = _as_test_list(tests)
+    tests = as_test_list(tests)
     columns: dict[str, list] = {}
     rs, lag = [], []
     for test, r in zip(tests, residual):
@@ -515,7 +513,7 @@ def diagnose(
     `holdout`, too few tests for leave-one-test-out; and the errors of
     [`jaxcable.fit`][] for bad data.
     """
-    tests = _as_test_list(tests)
+    tests = as_test_list(tests)
     if model is None:
         model = IntegratedModel()
     if not isinstance(model, AbstractCableModel):
@@ -542,7 +540,7 @@ def diagnose(
     for i, t in enumerate(tests):
         if getattr(t, "elongation", None) is None:
             raise ValueError(
-                f"`tests[{i}]` ({_test_id(t, i)}) has no elongation to diagnose."
+                f"`tests[{i}]` ({test_id(t, i)}) has no elongation to diagnose."
             )
     tests = [
         t
@@ -724,7 +722,7 @@ def diagnose(
             else f"{k}-fold by tests"
         ),
         holdout=holdout if split == "time" else None,
-        test_ids=tuple(_test_id(t, i) for i, t in enumerate(tests)),
+        test_ids=tuple(test_id(t, i) for i, t in enumerate(tests)),
         base_fit=base_fit,
     )
 
@@ -750,7 +748,7 @@ def write_diagnosis_report(out, diagnosis: Diagnosis, tests) -> list[pathlib.Pat
 
     out = pathlib.Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    tests = _as_test_list(tests)
+    tests = as_test_list(tests)
     whole = [dataclasses.replace(t, mask=None) for t in tests]
     base = model_elongations(diagnosis.base_fit, whole)
     named = (

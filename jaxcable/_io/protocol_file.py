@@ -44,9 +44,9 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from ._cable import Cable
-from ._io import DEFAULT_DIAMETER_MM, DEFAULT_RATE_MM_PER_MIN
-from ._protocol import Protocol
+from .._cable import Cable
+from .._drive import Protocol
+from .readers import DEFAULT_DIAMETER_MM, DEFAULT_RATE_MM_PER_MIN
 
 
 _TOP_LEVEL = (

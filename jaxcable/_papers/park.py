@@ -52,12 +52,10 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from ._analysis import loop_energies, secant_stiffness
-from ._cable import Cable
-from ._integrated import IntegratedModel
-from ._protocol import Protocol
-from ._results import RESULTS
-from ._simulate import simulate_rate_test
+from .._cable import Cable
+from .._drive import Protocol, loop_energies, secant_stiffness, simulate_rate_test
+from .._models import IntegratedModel
+from .._results import RESULTS
 
 
 _SLOW = 3e-3 / 60  # 3 mm/min, m/s

@@ -5,8 +5,8 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, Float, Int
 
-from ._cable import Cable
-from ._results import RESULTS
+from .._cable import Cable
+from .._results import RESULTS
 
 
 _State = TypeVar("_State")

@@ -3,8 +3,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-from . import _checks
-from ._five_element import FiveElementModel
+from .. import _checks
+from .piao import FiveElementModel
 
 
 class ParameterSurface(eqx.Module):
@@ -95,8 +95,8 @@ paper's 6 mm rope and the model's elongation rises with payload. A different sca
 
 
 # Piao Table 1 (loading), also used for unloading since Table 2 is lost.
-_PIAO_TABLE1 = dict(E_L2=9.5e9, E_L3=5.0e10, eta_L2=1.0e10, eta_L3=1.0e13)
-_PIAO_TABLE1.update(E_UL2=9.5e9, E_UL3=5.0e10, eta_UL2=1.0e10, eta_UL3=1.0e13)
+PIAO_TABLE1 = dict(E_L2=9.5e9, E_L3=5.0e10, eta_L2=1.0e10, eta_L3=1.0e13)
+PIAO_TABLE1.update(E_UL2=9.5e9, E_UL3=5.0e10, eta_UL2=1.0e10, eta_UL3=1.0e13)
 
 
 def piao_five_element(
@@ -133,4 +133,4 @@ def piao_five_element(
         _checks.require_positive("mass_kg", mass_kg, allow_zero=True)
         _checks.require_positive("length_m", length_m)
     E_1 = surface(mass_kg, length_m)
-    return FiveElementModel(E_L1=E_1, E_UL1=E_1, **_PIAO_TABLE1)
+    return FiveElementModel(E_L1=E_1, E_UL1=E_1, **PIAO_TABLE1)

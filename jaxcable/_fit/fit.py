@@ -28,16 +28,20 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Bool, Float, PRNGKeyArray, PyTree
 
-from . import _checks
-from ._abstract import AbstractCableModel
-from ._baselines import BoucWenModel, BurgersModel, HookeModel
-from ._cable import ZERO_CELSIUS, Cable
-from ._extensions import EXTENSIONS
-from ._five_element import FiveElementModel
-from ._integrated import IntegratedModel
-from ._io import TestData
-from ._results import RESULTS
-from ._simulate import CableState, init_state, step
+from .. import _checks
+from .._cable import ZERO_CELSIUS, Cable
+from .._drive import CableState, init_state, step
+from .._io import TestData
+from .._models import (
+    EXTENSIONS,
+    AbstractCableModel,
+    BoucWenModel,
+    BurgersModel,
+    FiveElementModel,
+    HookeModel,
+    IntegratedModel,
+)
+from .._results import RESULTS
 
 
 class IdentifiabilityWarning(UserWarning):
@@ -269,7 +273,7 @@ class PaddedTests(eqx.Module):
         return int(self.time.shape[0])
 
 
-def _test_id(test, index: int) -> str:
+def test_id(test, index: int) -> str:
     metadata = getattr(test, "metadata", None) or {}
     if "id" in metadata:
         return str(metadata["id"])
@@ -277,7 +281,7 @@ def _test_id(test, index: int) -> str:
     return pathlib.Path(source).name if source else f"test {index}"
 
 
-def _as_test_list(tests) -> list:
+def as_test_list(tests) -> list:
     if tests is None:
         raise ValueError("`tests` must be a TestData or a sequence of them, got None.")
     if isinstance(tests, (str, bytes, os.PathLike)):
@@ -324,12 +328,12 @@ def pad_tests(tests, *, multiple: int = 16) -> PaddedTests:
     samples, non-finite values, time not strictly increasing, negative force or
     force above the breaking load, a mask of the wrong shape or masking every sample.
     """
-    tests = _as_test_list(tests)
+    tests = as_test_list(tests)
     dtype = jnp.result_type(float)
     rows = []
     cables = []
     for i, test in enumerate(tests):
-        where = f"tests[{i}] ({_test_id(test, i)})"
+        where = f"tests[{i}] ({test_id(test, i)})"
         for field in ("time", "force", "elongation"):
             if getattr(test, field, None) is None:
                 raise ValueError(
@@ -568,7 +572,7 @@ def _layout_and_problem(model, tests, fit, per_test, transforms):
     for i in np.flatnonzero(~np.asarray(_check_model(model, data.cable))):
         raise ValueError(
             f"`model`: its parameters are outside their domain for tests[{i}] "
-            f"({_test_id(tests[i], i)}): {_DOMAIN_MESSAGE}"
+            f"({test_id(tests[i], i)}): {_DOMAIN_MESSAGE}"
         )
 
     def names_of(arg, value) -> tuple[str, ...]:
@@ -699,7 +703,7 @@ def make_loss(
     fields as `(tests,)` arrays).
     """
     problem, u0 = _layout_and_problem(
-        model, _as_test_list(tests), fit, per_test, transforms
+        model, as_test_list(tests), fit, per_test, transforms
     )
     layout = problem.layout
 
@@ -1435,7 +1439,7 @@ def fit(
             "(optx.LevenbergMarquardt, optx.GaussNewton, optx.Dogleg, ...), got "
             f"{type(solver).__name__}."
         )
-    test_list = _as_test_list(tests)
+    test_list = as_test_list(tests)
     problem, u_user = _layout_and_problem(model, test_list, fit, per_test, transforms)
     layout = problem.layout
     weight = np.asarray(problem.data.weight)
@@ -1456,7 +1460,7 @@ def fit(
         i = int(bad[0])
         raise ValueError(
             f"`model`: the start parameters fail on tests[{i}] "
-            f"({_test_id(test_list[i], i)}): the simulation is not finite or a "
+            f"({test_id(test_list[i], i)}): the simulation is not finite or a "
             "parameter is outside its domain for this cable (e.g. Park's t_r2 = "
             "lambda1 (L0/v)^2 - lambda2 <= 0); give start values valid for every test."
         )
@@ -1524,7 +1528,7 @@ def fit(
         loss=ssr,
         rmse_mm=1e3 * rmse,
         rmse_percent=100 * rmse / np.where(peak > 0, peak, np.nan),
-        test_ids=tuple(_test_id(t, i) for i, t in enumerate(test_list)),
+        test_ids=tuple(test_id(t, i) for i, t in enumerate(test_list)),
         num_samples=num_samples,
         warnings=tuple(messages),
         converged=converged,

@@ -22,8 +22,8 @@ import equinox as eqx
 import jax
 import numpy as np
 
-from ._cable import Cable
-from ._io import TestData, read_csv, read_test, write_csv
+from .._cable import Cable
+from .._io import TestData, read_csv, read_test, write_csv
 
 
 _PROG = "jaxcable"
@@ -70,7 +70,7 @@ def _show_progress(args) -> bool:
 def _model_class(name: str) -> type:
     import jaxcable
 
-    from ._abstract import AbstractCableModel
+    from .._models import AbstractCableModel
 
     attribute = _MODELS[name]
     cls = getattr(jaxcable, attribute, None)
@@ -171,7 +171,7 @@ def _resolve_model(args, *, per_test_hint: str) -> tuple[str, object]:
     model's defaults, or a PARAMS.json written by `jaxcable fit`
     (`FitResult.to_json`), whose model it names; `--model`, when given, must agree.
     """
-    from ._fit import FitResult
+    from .._fit import FitResult
 
     requested = args.model
     if not args.params:
@@ -281,7 +281,7 @@ def _simulate_history(args) -> int:
 def _simulate_protocol(args) -> int:
     import jaxcable
 
-    from ._protocol_file import read_protocol
+    from .._io import read_protocol
 
     spec = read_protocol(args.input)
     name, model = _resolve_model(args, per_test_hint=_SIMULATE_PER_TEST)
@@ -371,7 +371,7 @@ def _read_tests(
 ) -> list[TestData]:
     """Read measured tests with `read_test` (canonical or raw), with elongation,
     thinned to every `every`-th sample."""
-    from ._report import Progress
+    from .._report import Progress
 
     tests = []
     with Progress("reading", len(paths), enabled=progress) as bar:
@@ -428,7 +428,7 @@ def _run_fit(model, name: str, tests, *, fit, per_test, args, progress: bool):
     returned in the result (and printed with the summary), not issued."""
     import jaxcable
 
-    from ._report import Progress
+    from .._report import Progress
 
     n = sum(int(np.sum(t.mask)) for t in tests)
     label = f"fitting {name} to {len(tests)} test(s), {n} samples"
@@ -482,7 +482,7 @@ def _fit_failure(result) -> _CliError | None:
 
 
 def _fit(args) -> int:
-    from ._report import write_report
+    from .._report import write_report
 
     progress = _show_progress(args)
     name, model = _resolve_model(
@@ -542,8 +542,8 @@ def _fit(args) -> int:
 
 def _run_diagnosis(model, name, tests, *, args, progress, log):
     """`jaxcable.diagnose` with the command line's options."""
-    from ._diagnose import diagnose
-    from ._report import Progress
+    from .._diagnose import diagnose
+    from .._report import Progress
 
     bar = Progress("diagnosing", enabled=progress)
     with bar:
@@ -566,7 +566,7 @@ def _run_diagnosis(model, name, tests, *, args, progress, log):
 
 
 def _diagnose(args) -> int:
-    from ._diagnose import write_diagnosis_report
+    from .._diagnose import write_diagnosis_report
 
     progress = _show_progress(args)
     # With --json, stdout carries the one JSON object; everything else goes to stderr.
@@ -791,7 +791,7 @@ def _demo_simulate(args, out: pathlib.Path) -> tuple[list, list[pathlib.Path]]:
 def _demo_fit(args, out: pathlib.Path, files: list, source: str, progress: bool):
     import jaxcable
 
-    from ._report import write_report
+    from .._report import write_report
 
     model = jaxcable.IntegratedModel()
     names = (
@@ -884,7 +884,7 @@ def _demo_diagnose(args, out: pathlib.Path, tests, progress: bool):
     `out/diagnosis/`."""
     import jaxcable
 
-    from ._diagnose import write_diagnosis_report
+    from .._diagnose import write_diagnosis_report
 
     print()
     print(

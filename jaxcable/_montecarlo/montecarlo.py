@@ -17,12 +17,11 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
 from jaxtyping import Array, ArrayLike, Bool, Float, Int, PRNGKeyArray
 
-from . import _checks
-from ._abstract import AbstractCableModel
-from ._cable import CABLE_FIELDS, Cable
-from ._protocol import Protocol
-from ._results import RESULTS
-from ._simulate import _check_history, simulate_force_history, simulate_rate_test
+from .. import _checks
+from .._cable import CABLE_FIELDS, Cable
+from .._drive import Protocol, check_history, simulate_force_history, simulate_rate_test
+from .._models import AbstractCableModel
+from .._results import RESULTS
 
 
 # ----------------------------------------------------------------------------------
@@ -847,7 +846,7 @@ def _check_loads(loads, cables: Cable):
             else:
                 tj, fj, mj = loads.time, loads.force, loads.mask
             try:
-                _check_history(_cable(cables, j), tj, fj, mj, "force")
+                check_history(_cable(cables, j), tj, fj, mj, "force")
             except ValueError as e:
                 raise ValueError(f"`loads` (cable {j}): {e}") from None
             if t.ndim == 1:

@@ -1,52 +1,12 @@
-import math
-
 import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, Float, Int
 
-from ._abstract import AbstractCableModel, StrainParts, positive_result
-from ._cable import Cable
-from ._checks import check_parameters
-from ._memory import running_max
-from ._results import RESULTS
-
-
-# Below this h / tau the closed form loses digits to cancellation (relative error
-# ~2 eps tau / h); its Taylor series, sum_{k>=1} (-1)^(k+1) x^k / (k+1)!, truncated
-# after x^9, is exact to rounding there (next term ~5e-17 of the value).
-_SERIES_BELOW = 0.1
-_RAMP_SERIES = tuple((-1.0) ** (k + 1) / math.factorial(k + 1) for k in range(1, 10))
-
-
-def _ramp_factor(x):
-    """1 - (1 - exp(-x)) / x = (x + expm1(-x)) / x, the share of a linear stress ramp
-    that a Kelvin-Voigt element has not yet followed after x = h / tau.
-
-    Continued by its Taylor series near x = 0 so that the value (0 at x = 0) and its
-    gradient (1/2) stay finite there.
-    """
-    small = jnp.abs(x) < _SERIES_BELOW
-    x_safe = jnp.where(small, 1.0, x)
-    direct = (x_safe + jnp.expm1(-x_safe)) / x_safe
-    series = jnp.zeros_like(x)
-    for c in reversed(_RAMP_SERIES):  # Horner, highest power first
-        series = (series + c) * x
-    return jnp.where(small, series, direct)
-
-
-def kelvin_voigt_step(q0, s0, s1, h, E, eta):
-    """Exact strain of a Kelvin-Voigt element (spring E parallel to dashpot eta) after a
-    step of length h over which the stress goes linearly from s0 to s1.
-
-    Solves eta q' + E q = s(t) in closed form: with tau = eta / E and a = exp(-h / tau),
-    q1 = a q0 + (1/E) [s1 - a s0 - (s1 - s0) (tau / h) (1 - a)], written as
-    a q0 + (1/E) [s0 (1 - a) + (s1 - s0) (1 - (tau / h)(1 - a))] so that the h -> 0
-    limit (q1 = q0) has finite values and gradients. Units: stress and E in Pa, eta in
-    Pa s, h in s; q is a strain.
-    """
-    x = h * E / eta
-    decay = jnp.exp(-x)
-    return decay * q0 + (-s0 * jnp.expm1(-x) + (s1 - s0) * _ramp_factor(x)) / E
+from .._cable import Cable
+from .._checks import check_parameters
+from .._results import RESULTS
+from .base import AbstractCableModel, StrainParts, positive_result
+from .kernels import kelvin_voigt_step, running_max
 
 
 class FiveElementState(eqx.Module):

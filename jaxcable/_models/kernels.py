@@ -20,10 +20,12 @@ force sample moves each memory by at most a stated multiple of d.
   most d / (2 r).
 """
 
+import math
+
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from ._cable import Cable
+from .._cable import Cable
 
 
 # The force below which time only partly counts as under tension: the larger of a share
@@ -103,3 +105,71 @@ def loading_weight(
     """Loading weight (x - centre + radius) / (2 radius) in [0, 1] of the play band
     centred at `centre` (the output of [`play`][]): 1 on loading, 0 on unloading."""
     return jnp.clip((x - centre + radius) / (2.0 * radius), 0.0, 1.0)
+
+
+# Below this h / tau the closed form loses digits to cancellation (relative error
+# ~2 eps tau / h); its Taylor series, sum_{k>=1} (-1)^(k+1) x^k / (k+1)!, truncated
+# after x^9, is exact to rounding there (next term ~5e-17 of the value).
+_SERIES_BELOW = 0.1
+_RAMP_SERIES = tuple((-1.0) ** (k + 1) / math.factorial(k + 1) for k in range(1, 10))
+
+
+def ramp_factor(x):
+    """1 - (1 - exp(-x)) / x = (x + expm1(-x)) / x, the share of a linear stress ramp
+    that a Kelvin-Voigt element has not yet followed after x = h / tau.
+
+    Continued by its Taylor series near x = 0 so that the value (0 at x = 0) and its
+    gradient (1/2) stay finite there.
+    """
+    small = jnp.abs(x) < _SERIES_BELOW
+    x_safe = jnp.where(small, 1.0, x)
+    direct = (x_safe + jnp.expm1(-x_safe)) / x_safe
+    series = jnp.zeros_like(x)
+    for c in reversed(_RAMP_SERIES):  # Horner, highest power first
+        series = (series + c) * x
+    return jnp.where(small, series, direct)
+
+
+def kelvin_voigt_step(q0, s0, s1, h, E, eta):
+    """Exact strain of a Kelvin-Voigt element (spring E parallel to dashpot eta) after a
+    step of length h over which the stress goes linearly from s0 to s1.
+
+    Solves eta q' + E q = s(t) in closed form: with tau = eta / E and a = exp(-h / tau),
+    q1 = a q0 + (1/E) [s1 - a s0 - (s1 - s0) (tau / h) (1 - a)], written as
+    a q0 + (1/E) [s0 (1 - a) + (s1 - s0) (1 - (tau / h)(1 - a))] so that the h -> 0
+    limit (q1 = q0) has finite values and gradients. Units: stress and E in Pa, eta in
+    Pa s, h in s; q is a strain.
+    """
+    x = h * E / eta
+    decay = jnp.exp(-x)
+    return decay * q0 + (-s0 * jnp.expm1(-x) + (s1 - s0) * ramp_factor(x)) / E
+
+
+def safe_pow(base, exponent):
+    """`base**exponent` for `base >= 0`, with finite gradients at `base == 0`."""
+    positive = base > 0
+    safe = jnp.where(positive, base, 1.0)
+    return jnp.where(positive, jnp.exp(exponent * jnp.log(safe)), 0.0)
+
+
+def relaxation_average(t, tau):
+    """(1 - exp(-t / tau)) / t, continued by 1 / tau at t = 0 (finite gradients)."""
+    positive = t > 0
+    t_safe = jnp.where(positive, t, 1.0)
+    return jnp.where(positive, -jnp.expm1(-t_safe / tau) / t_safe, 1.0 / tau)
+
+
+def retarded(q0, target0, target1, dt, tau):
+    """Exact value after `dt` of q' = (target - q) / tau with the target linear over
+    the step from `target0` to `target1` (a Kelvin-Voigt element driven by a
+    piecewise-linear input); finite values and gradients at dt = 0.
+
+    q1 = a q0 + (1 - a) target0 + (target1 - target0) (1 - (tau / dt)(1 - a)),
+    a = exp(-dt / tau).
+    """
+    x = dt / tau
+    return (
+        jnp.exp(-x) * q0
+        - jnp.expm1(-x) * target0
+        + (target1 - target0) * ramp_factor(x)
+    )

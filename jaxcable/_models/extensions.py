@@ -35,13 +35,18 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int, PyTree
 
-from . import _checks
-from ._abstract import AbstractCableModel, StrainParts
-from ._cable import Cable
-from ._five_element import _ramp_factor
-from ._integrated import IntegratedModel, _relaxation_average, _safe_pow
-from ._memory import running_max, tension_time_step
-from ._results import RESULTS
+from .. import _checks
+from .._cable import Cable
+from .._results import RESULTS
+from .base import AbstractCableModel, StrainParts
+from .kernels import (
+    ramp_factor,
+    relaxation_average,
+    running_max,
+    safe_pow,
+    tension_time_step,
+)
+from .park import IntegratedModel
 
 
 # Gas constant, J/(mol K).
@@ -317,9 +322,9 @@ class Hereditary(AbstractCableModel[HereditaryState]):
         x = dt_tension / inner.t_c
         compliance = 1.0 / (inner.E2c * area)
         kelvin_voigt = jnp.exp(-x) * state.kelvin_voigt + compliance * (
-            -state.force * jnp.expm1(-x) + (force - state.force) * _ramp_factor(x)
+            -state.force * jnp.expm1(-x) + (force - state.force) * ramp_factor(x)
         )
-        equivalent = impulse * _relaxation_average(t_total, inner.t_c) * compliance
+        equivalent = impulse * relaxation_average(t_total, inner.t_c) * compliance
         parts = _add(parts, creep=self.weight * (kelvin_voigt - equivalent))
         new = HereditaryState(
             base_state, force, impulse, t_total, force_max, kelvin_voigt
@@ -428,7 +433,7 @@ class SecondRetardation(AbstractCableModel[SecondRetardationState]):
         x = dt / self.tau_k
         compliance = 1.0 / (self.E_k * cable.area)  # 0 for E_k = inf
         strain = jnp.exp(-x) * state.strain + compliance * (
-            -state.force * jnp.expm1(-x) + (force - state.force) * _ramp_factor(x)
+            -state.force * jnp.expm1(-x) + (force - state.force) * ramp_factor(x)
         )
         parts = _add(parts, creep=strain)
         return SecondRetardationState(base_state, force, strain), parts
@@ -552,7 +557,7 @@ class StressNonlinearCreep(AbstractCableModel[StressNonlinearCreepState]):
         ratio = jnp.maximum(0.5 * (state.force + force) / cable.area, 0.0) / (
             self.stress_ref
         )
-        gain = jnp.where(self.n == 0, 1.0, _safe_pow(ratio, self.n))
+        gain = jnp.where(self.n == 0, 1.0, safe_pow(ratio, self.n))
         creep_max = running_max(state.creep_max, parts.creep)
         extra_max = state.extra_max + (gain - 1.0) * (creep_max - state.creep_max)
         positive = creep_max > 0

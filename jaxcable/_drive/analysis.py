@@ -8,8 +8,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-from ._checks import is_concrete
-from ._simulate import Trajectory
+from .._checks import is_concrete
+from .simulate import Trajectory
 
 
 # One value per load-unload cycle (an alias keeps the jaxtyping string out of

@@ -9,12 +9,12 @@ import optimistix as optx
 from jax.ad_checkpoint import checkpoint_name
 from jaxtyping import Array, ArrayLike, Bool, Float, Int, PyTree
 
-from . import _checks
-from ._abstract import AbstractCableModel, StrainParts
-from ._cable import Cable, check_scalar_cable
-from ._newton import Newton, root_scalar
-from ._protocol import Protocol
-from ._results import RESULTS
+from .. import _checks
+from .._cable import Cable, check_scalar_cable
+from .._models import AbstractCableModel, StrainParts
+from .._results import RESULTS
+from .newton import Newton, root_scalar
+from .protocol import Protocol
 
 
 # Incremented each time a kernel is traced; tests use it to show that a repeated call
@@ -336,11 +336,11 @@ def simulate_force_history(
 
     A [`jaxcable.Trajectory`][].
     """
-    time, force, mask = _check_history(cable, time, force, mask, "force")
+    time, force, mask = check_history(cable, time, force, mask, "force")
     return _force_kernel(model, cable, time, force, mask, throw, checkpoint)
 
 
-def _check_history(cable, time, x, mask, xname):
+def check_history(cable, time, x, mask, xname):
     if _checks.is_concrete(cable):
         check_scalar_cable(cable)
     if _checks.is_concrete(time, x, mask):
@@ -636,7 +636,7 @@ def simulate_elongation_history(
 
     A [`jaxcable.Trajectory`][] whose `force` holds the solved forces, N.
     """
-    time, elongation, mask = _check_history(cable, time, elongation, mask, "elongation")
+    time, elongation, mask = check_history(cable, time, elongation, mask, "elongation")
     return _elongation_kernel(
         model, cable, time, elongation, mask, solver, throw, checkpoint
     )

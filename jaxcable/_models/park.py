@@ -2,42 +2,18 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, Float, Int
 
-from . import _checks
-from ._abstract import AbstractCableModel, StrainParts, positive_result
-from ._cable import Cable
-from ._five_element import _ramp_factor
-from ._memory import running_max, tension_force, tension_time_step
-from ._results import RESULTS
-
-
-def _safe_pow(base, exponent):
-    """`base**exponent` for `base >= 0`, with finite gradients at `base == 0`."""
-    positive = base > 0
-    safe = jnp.where(positive, base, 1.0)
-    return jnp.where(positive, jnp.exp(exponent * jnp.log(safe)), 0.0)
-
-
-def _relaxation_average(t, tau):
-    """(1 - exp(-t / tau)) / t, continued by 1 / tau at t = 0 (finite gradients)."""
-    positive = t > 0
-    t_safe = jnp.where(positive, t, 1.0)
-    return jnp.where(positive, -jnp.expm1(-t_safe / tau) / t_safe, 1.0 / tau)
-
-
-def _retarded(q0, target0, target1, dt, tau):
-    """Exact value after `dt` of q' = (target - q) / tau with the target linear over
-    the step from `target0` to `target1` (a Kelvin-Voigt element driven by a
-    piecewise-linear input); finite values and gradients at dt = 0.
-
-    q1 = a q0 + (1 - a) target0 + (target1 - target0) (1 - (tau / dt)(1 - a)),
-    a = exp(-dt / tau).
-    """
-    x = dt / tau
-    return (
-        jnp.exp(-x) * q0
-        - jnp.expm1(-x) * target0
-        + (target1 - target0) * _ramp_factor(x)
-    )
+from .. import _checks
+from .._cable import Cable
+from .._results import RESULTS
+from .base import AbstractCableModel, StrainParts, positive_result
+from .kernels import (
+    relaxation_average,
+    retarded,
+    running_max,
+    safe_pow,
+    tension_force,
+    tension_time_step,
+)
 
 
 class IntegratedState(eqx.Module):
@@ -229,15 +205,15 @@ class IntegratedModel(AbstractCableModel[IntegratedState]):
         # Park Eq. 1-2 with h from the previous sample's total strain; Eq. 9's
         # unloading line from the largest force, never below the loading curve.
         compliance_c = 1.0 / (self.E1c * area)
-        h = 1.0 + self.beta * _safe_pow(jnp.maximum(state.strain, 0.0), self.gamma)
-        static = _safe_pow(force * compliance_c, h)
-        static_max = _safe_pow(force_max * compliance_c, h)
+        h = 1.0 + self.beta * safe_pow(jnp.maximum(state.strain, 0.0), self.gamma)
+        static = safe_pow(force * compliance_c, h)
+        static_max = safe_pow(force_max * compliance_c, h)
         drop = force_max - force
         inst = jnp.maximum(static_max - drop / (self.E1r * area), static)
 
         # Park Eq. 5 with MODEL_NOTES point 2: F_eq (1 - e^{-T/t_c}) / (E2c A) + I/(eta0 A).
         creep = impulse * (
-            _relaxation_average(t_total, self.t_c) / (self.E2c * area)
+            relaxation_average(t_total, self.t_c) / (self.E2c * area)
             + 1.0 / (self.eta0 * area)
         )
 
@@ -250,8 +226,8 @@ class IntegratedModel(AbstractCableModel[IntegratedState]):
         depth = drop / jnp.maximum(force_max, tension_force(cable, force_max))
         short_target = f_eq * depth / (self.E2r * area)
         long_target = drop / (self.E3r * area)
-        short = _retarded(state.short, state.short_target, short_target, dt, self.t_r1)
-        long = _retarded(
+        short = retarded(state.short, state.short_target, short_target, dt, self.t_r1)
+        long = retarded(
             state.long,
             state.long_target,
             long_target,

@@ -1,0 +1,154 @@
+"""The one registry of cable models: names, command-line names and fit metadata.
+
+Everything that needs to know "which models exist" reads this module: the command line
+(`--model NAME`), `FitResult.from_json` (class names in PARAMS.json), the fit
+(reparameterisation and units of each parameter) and the diagnosis (the candidate
+extensions and the base parameters refitted by default).
+"""
+
+import dataclasses
+
+from .base import AbstractCableModel
+from .baselines import BoucWenModel, BurgersModel, HookeModel
+from .extensions import EXTENSIONS
+from .park import IntegratedModel
+from .piao import FiveElementModel
+
+
+@dataclasses.dataclass(frozen=True)
+class ParameterInfo:
+    """How a parameter is fitted, and its unit.
+
+    Each fitted parameter x is a function of one unconstrained number u:
+
+    - `"log"`: x = exp(u) (x > 0: moduli, viscosities, times, ...);
+    - `"log1"`: x = 1 + exp(u) (x > 1: the Bouc-Wen exponent n >= 1);
+    - `"linear"`: x = s u, s = |x_start| (signed or possibly zero: Park's lambda2);
+    - `"tanh:OTHER"`: x = OTHER tanh(u) (|x| < OTHER: Bouc-Wen |gamma| <= beta).
+
+    `stiffness` is the power k with which the parameter is multiplied by c**k when a
+    data-derived initial guess scales the model's stiffness by c (moduli and viscosities
+    k = 1, compliances k = -1, the rest 0): for the linear models this divides every
+    strain by exactly c.
+    """
+
+    transform: str
+    unit: str
+    stiffness: float = 0.0
+
+
+_MODULUS = ParameterInfo("log", "Pa", 1.0)
+_VISCOSITY = ParameterInfo("log", "Pa s", 1.0)
+
+# Park's parameters that cyclic tests identify. Hardening (beta, gamma) and the
+# long-term retardation law (lambda1, lambda2) are nearly degenerate on them
+# (correlations > 0.999, a near-zero singular value): a fit with all twelve free wanders
+# along a flat valley, so these eight are what the fit, the diagnosis, the demo and the
+# synthetic generators vary by default.
+PARK_IDENTIFIABLE = ("E1c", "E1r", "E2c", "t_c", "eta0", "E2r", "t_r1", "E3r")
+
+
+@dataclasses.dataclass(frozen=True)
+class ModelEntry:
+    """One model of the registry.
+
+    **Fields:**
+
+    - `cls`: the model class.
+    - `cli_name`: its name on the command line (`--model NAME`).
+    - `parameters`: `{field: ParameterInfo}` of every fitted field.
+    - `identifiable`: the fields fitted by default (all of `parameters` if empty).
+    """
+
+    cls: type
+    cli_name: str
+    parameters: dict[str, ParameterInfo]
+    identifiable: tuple[str, ...] = ()
+
+
+MODELS: tuple[ModelEntry, ...] = (
+    ModelEntry(
+        IntegratedModel,
+        "integrated",
+        {
+            "E1c": _MODULUS,
+            "beta": ParameterInfo("log", "-"),
+            "gamma": ParameterInfo("log", "-"),
+            "E1r": _MODULUS,
+            "E2c": _MODULUS,
+            "t_c": ParameterInfo("log", "s"),
+            "eta0": _VISCOSITY,
+            "E2r": _MODULUS,
+            "t_r1": ParameterInfo("log", "s"),
+            "E3r": _MODULUS,
+            "lambda1": ParameterInfo("log", "1/s"),
+            # t_r2 = lambda1 (L0/v)^2 - lambda2 (Park Eq. 8): either sign.
+            "lambda2": ParameterInfo("linear", "s"),
+        },
+        PARK_IDENTIFIABLE,
+    ),
+    ModelEntry(
+        FiveElementModel,
+        "five-element",
+        {
+            **{
+                n: _MODULUS for n in ("E_L1", "E_L2", "E_L3", "E_UL1", "E_UL2", "E_UL3")
+            },
+            **{n: _VISCOSITY for n in ("eta_L2", "eta_L3", "eta_UL2", "eta_UL3")},
+        },
+    ),
+    ModelEntry(HookeModel, "hooke", {"E": _MODULUS}),
+    ModelEntry(
+        BurgersModel,
+        "burgers",
+        {"E1": _MODULUS, "eta0": _VISCOSITY, "E2": _MODULUS, "eta2": _VISCOSITY},
+    ),
+    ModelEntry(
+        BoucWenModel,
+        "bouc-wen",
+        {
+            "E": _MODULUS,
+            "sigma_y": ParameterInfo("log", "Pa"),
+            # eps = sigma / E + z_y (...): E -> c E with z_y -> z_y / c divides eps by c.
+            "z_y": ParameterInfo("log", "-", -1.0),
+            "A": ParameterInfo("log", "-"),
+            "beta": ParameterInfo("log", "-"),
+            # The model requires |gamma| <= beta (a dissipative loop).
+            "gamma": ParameterInfo("tanh:beta", "-"),
+            "n": ParameterInfo("log1", "-"),
+        },
+    ),
+)
+DEFAULT_CLI_MODEL = "integrated"
+
+BY_CLI_NAME: dict[str, ModelEntry] = {e.cli_name: e for e in MODELS}
+_BY_CLASS: dict[type, ModelEntry] = {e.cls: e for e in MODELS}
+
+# Every class a PARAMS.json may name, by class name: the models and the extensions.
+CLASSES_BY_NAME: dict[str, type] = {
+    cls.__name__: cls for cls in (*_BY_CLASS, *EXTENSIONS.values())
+}
+
+
+def parameter_info(cls: type, field: str) -> ParameterInfo | None:
+    """How `field` of model class `cls` is fitted: the table above for the models,
+    the class's own `FIT_INFO` for the extensions; None for a field not fitted."""
+    entry = _BY_CLASS.get(cls)
+    if entry is not None:
+        return entry.parameters.get(field)
+    declared = getattr(cls, "FIT_INFO", {}).get(field)
+    return None if declared is None else ParameterInfo(*declared)
+
+
+def identifiable(model: AbstractCableModel) -> tuple[str, ...] | None:
+    """The fields fitted by default for `model`'s class, or None for all of them."""
+    entry = _BY_CLASS.get(type(model))
+    if entry is None or not entry.identifiable:
+        return None
+    return entry.identifiable
+
+
+def cli_name(model: AbstractCableModel) -> str | None:
+    """The command-line name of a model instance's class, or None."""
+    entry = _BY_CLASS.get(type(model))
+    return None if entry is None else entry.cli_name

@@ -1,0 +1,4 @@
+from .montecarlo import (
+    IndependentParameters as IndependentParameters,
+    LogNormal as LogNormal,
+)
