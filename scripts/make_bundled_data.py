@@ -5,7 +5,7 @@
 The data are synthetic: Park et al.'s test protocol (10 cycles, a rest of 24/48/72 h,
 a re-stretch) at 100 and 300 mm, 3 and 50 mm/min, 100 and 150 N, simulated with the
 default IntegratedModel (Dyneema SK78 3 mm) plus one physical effect the model lacks
-and measurement noise; see `jaxcable._synthetic.bundled_dataset`.
+and measurement noise; see `jaxcable._papers.synthetic.bundled_dataset`.
 """
 
 import pathlib
@@ -16,7 +16,7 @@ import jax
 def main():
     jax.config.update("jax_enable_x64", True)
     import jaxcable as jc
-    from jaxcable._synthetic import bundled_dataset
+    from jaxcable._papers.synthetic import bundled_dataset
 
     out = pathlib.Path(__file__).resolve().parent.parent / "jaxcable" / "data"
     out.mkdir(exist_ok=True)
