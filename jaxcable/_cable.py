@@ -1,12 +1,13 @@
+"""The cable a model is run on, in SI units, and the one conversion from the units of
+data files (mm, mm/min, °C) to it."""
+
 import math
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float
-
-from ._custom_types import ScalarLike
+from jaxtyping import Array, ArrayLike, Float
 
 
 def _is_concrete(x) -> bool:
@@ -19,11 +20,26 @@ CABLE_FIELDS = ("length", "diameter", "speed", "breaking_load", "temperature")
 # Kelvin at 0 °C: data files record temperature in °C, Cable holds kelvin.
 ZERO_CELSIUS = 273.15
 
+# Metres per millimetre: data files give lengths in mm and speeds in mm/min, Cable
+# holds m and m/s.
+M_PER_MM = 1e-3
+
+# Park's Dyneema SK78 test (Park, Section 2.1): the diameter and crosshead speed of a
+# cable whose file leaves them out.
+DEFAULT_DIAMETER_MM = 3.0
+DEFAULT_RATE_MM_PER_MIN = 3.0
+
+
+def speed_from_mm_per_min(rate_mm_per_min):
+    """The crosshead speed in m/s of a rate in mm/min (the unit of data files)."""
+    return rate_mm_per_min * M_PER_MM / 60
+
 
 class Cable(eqx.Module):
     """One cable (or a batch of cables, for `jax.vmap`) and the speed it is stretched at.
 
-    All fields are in SI units. Batching: give arrays of equal leading shape and
+    All fields are in SI units; [`jaxcable.Cable.from_mm`][] builds one from the units
+    of data files (mm, mm/min, °C). Batching: give arrays of equal leading shape and
     `jax.vmap` over the `Cable`, e.g. `jax.vmap(simulate, in_axes=(None, 0, None))`.
 
     **Arguments:**
@@ -42,8 +58,12 @@ class Cable(eqx.Module):
     """
 
     length: Float[Array, "*batch"] = eqx.field(converter=jnp.asarray)
-    diameter: Float[Array, "*batch"] = eqx.field(converter=jnp.asarray, default=3e-3)
-    speed: Float[Array, "*batch"] = eqx.field(converter=jnp.asarray, default=3e-3 / 60)
+    diameter: Float[Array, "*batch"] = eqx.field(
+        converter=jnp.asarray, default=DEFAULT_DIAMETER_MM * M_PER_MM
+    )
+    speed: Float[Array, "*batch"] = eqx.field(
+        converter=jnp.asarray, default=speed_from_mm_per_min(DEFAULT_RATE_MM_PER_MIN)
+    )
     breaking_load: Float[Array, "*batch"] = eqx.field(
         converter=jnp.asarray, default=2000.0
     )
@@ -64,6 +84,46 @@ class Cable(eqx.Module):
                     f"Cable `{name}` must be positive (SI units), got {v}."
                 )
 
+    @classmethod
+    def from_mm(
+        cls,
+        *,
+        length_mm: Float[ArrayLike, "*batch"],
+        diameter_mm: Float[ArrayLike, "*batch"] = DEFAULT_DIAMETER_MM,
+        rate_mm_per_min: Float[ArrayLike, "*batch"] = DEFAULT_RATE_MM_PER_MIN,
+        temperature_C: Float[ArrayLike, "*batch"] | None = None,
+        breaking_load_N: Float[ArrayLike, "*batch"] | None = None,
+    ) -> "Cable":
+        """The cable described in the units of data files and their metadata.
+
+        The arguments are named as the metadata keys of a test file (and of a
+        protocol file), so that a file's metadata can be passed as it is.
+
+        **Arguments:**
+
+        - `length_mm`: free length, mm.
+        - `diameter_mm`: nominal diameter, mm (default 3 mm).
+        - `rate_mm_per_min`: crosshead speed, mm/min (default 3 mm/min).
+        - `temperature_C`: temperature, °C, or `None` for the `Cable` default (20 °C).
+        - `breaking_load_N`: breaking load, N, or `None` for the `Cable` default.
+
+        **Returns:**
+
+        A `Cable` in SI: `length` and `diameter` in m, `speed` in m/s, `temperature`
+        in K.
+        """
+        kwargs = {}
+        if temperature_C is not None:
+            kwargs["temperature"] = temperature_C + ZERO_CELSIUS
+        if breaking_load_N is not None:
+            kwargs["breaking_load"] = breaking_load_N
+        return cls(
+            length=length_mm * M_PER_MM,
+            diameter=diameter_mm * M_PER_MM,
+            speed=speed_from_mm_per_min(rate_mm_per_min),
+            **kwargs,
+        )
+
     @property
     def area(self) -> Float[Array, "*batch"]:
         """Cross-sectional area pi d^2 / 4, m^2."""
@@ -71,7 +131,8 @@ class Cable(eqx.Module):
 
     @property
     def strain_rate(self) -> Float[Array, "*batch"]:
-        """Strain rate v / L0 of the crosshead, 1/s (MODEL_NOTES point 5)."""
+        """Strain rate v / L0 of the crosshead, 1/s: the rate a rate-driven test
+        strains the cable at (Park Eq. 6 and 8 read it)."""
         return self.speed / self.length
 
 
@@ -84,10 +145,3 @@ def check_scalar_cable(cable: Cable) -> None:
                 f"`cable.{name}` has shape {shape}; the kernels simulate one cable. "
                 "For a batch, `jax.vmap` over the Cable (or use the batched front ends)."
             )
-
-
-def as_scalar(x: ScalarLike, name: str) -> Float[Array, ""]:
-    x = jnp.asarray(x)
-    if x.shape != ():
-        raise ValueError(f"`{name}` must be a scalar, got shape {x.shape}.")
-    return x

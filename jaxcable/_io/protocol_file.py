@@ -39,14 +39,13 @@ otherwise be silently ignored).
 import json
 import math
 import os
-import pathlib
 from typing import Any, NamedTuple
 
 import numpy as np
 
-from .._cable import Cable
+from .._cable import DEFAULT_DIAMETER_MM, DEFAULT_RATE_MM_PER_MIN, Cable
 from .._drive import Protocol
-from .readers import DEFAULT_DIAMETER_MM, DEFAULT_RATE_MM_PER_MIN
+from .json_file import read_json
 
 
 _TOP_LEVEL = (
@@ -100,7 +99,7 @@ class ProtocolFile(NamedTuple):
         return None if k < 0 else k
 
 
-def _is_number(value: Any) -> bool:
+def _is_json_number(value: Any) -> bool:
     return isinstance(value, int | float) and not isinstance(value, bool)
 
 
@@ -128,7 +127,7 @@ class _Reader:
                 raise ValueError(f"{where}: missing key '{key}' ({unit}).")
             return float(default)
         value = self.obj[key]
-        if not _is_number(value) or not math.isfinite(value):
+        if not _is_json_number(value) or not math.isfinite(value):
             raise self.error(
                 key, f"{json.dumps(value)} is not a finite number ({unit})."
             )
@@ -141,7 +140,7 @@ class _Reader:
         if key not in self.obj:
             return default
         value = self.obj[key]
-        if not (_is_number(value) and float(value).is_integer() and value >= 1):
+        if not (_is_json_number(value) and float(value).is_integer() and value >= 1):
             raise self.error(key, f"{json.dumps(value)} is not an integer >= 1.")
         return int(value)
 
@@ -164,16 +163,10 @@ def read_protocol(path: str | os.PathLike) -> ProtocolFile:
     first problem: invalid JSON (with its line and column), a missing or unknown key,
     a value that is not a positive number or count, a segment that does not follow on
     from the force the previous one ends at, or a force above the cable's breaking
-    load. `OSError` when the file cannot be read.
+    load; naming the file when it cannot be read or is not UTF-8 text.
     """
     path = str(path)
-    text = pathlib.Path(path).read_text(encoding="utf-8")
-    try:
-        doc = json.loads(text)
-    except json.JSONDecodeError as e:
-        raise ValueError(
-            f"{path}, line {e.lineno}, column {e.colno}: invalid JSON: {e.msg}."
-        ) from None
+    doc = read_json(path, "a protocol file")
     if not isinstance(doc, dict):
         raise ValueError(
             f"{path}: a protocol file is a JSON object with length_mm and segments, "
@@ -196,7 +189,7 @@ def read_protocol(path: str | os.PathLike) -> ProtocolFile:
                 raise top.error(key, f"{json.dumps(doc[key])} is not a string.")
             metadata[key] = doc[key]
     metadata.update(length_mm=length, diameter_mm=diameter, rate_mm_per_min=rate)
-    cable = Cable(length=length * 1e-3, diameter=diameter * 1e-3, speed=rate / 6e4)
+    cable = Cable.from_mm(length_mm=length, diameter_mm=diameter, rate_mm_per_min=rate)
     limit = float(cable.breaking_load)
 
     if "segments" not in doc:

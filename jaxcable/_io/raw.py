@@ -1,0 +1,185 @@
+"""[`jaxcable.read_test`][]: one test from a canonical CSV file or a raw tensile-tester
+export, whose layout `sniff.py` detects, with the slack stretches masked."""
+
+import os
+from collections.abc import Sequence
+
+import numpy as np
+
+from .parsing import (
+    ColumnMap,
+    assemble,
+    metadata_value,
+    parse_metadata,
+    parse_rows,
+    read_lines,
+)
+from .sniff import find_data_start, header_columns, sniff_separator
+from .testdata import TestData, mask_slack
+from .units import COLUMNS, IGNORE, accepted_names, missing_quantities
+
+
+def _parse_columns_spec(columns: str | Sequence[str], path) -> list[ColumnMap]:
+    """The column map named by `columns` (`"time_s,elongation_mm,force_N,-"`)."""
+    tokens = (
+        [t.strip() for t in columns.split(",")]
+        if isinstance(columns, str)
+        else [str(t).strip() for t in columns]
+    )
+    shown = ",".join(tokens)
+    accepted = ", ".join(COLUMNS)
+    mapped: list[ColumnMap] = []
+    seen: dict[str, str] = {}
+    for position, token in enumerate(tokens, start=1):
+        if token == IGNORE:
+            mapped.append(ColumnMap(IGNORE, IGNORE, 1.0, position))
+            continue
+        unit = COLUMNS.get(token)
+        if unit is None:
+            raise ValueError(
+                f"{path}: columns '{shown}': column {position} '{token}' is not a "
+                f"column name (accepted: {accepted}, or '-' to ignore a column)."
+            )
+        if unit.quantity in seen:
+            raise ValueError(
+                f"{path}: columns '{shown}': '{token}' is a second {unit.quantity} "
+                f"column (the first is '{seen[unit.quantity]}')."
+            )
+        seen[unit.quantity] = token
+        mapped.append(ColumnMap(token, unit.quantity, unit.to_si, position))
+    missing = missing_quantities(seen)
+    if missing:
+        quantity = missing[0]
+        raise ValueError(
+            f"{path}: columns '{shown}' names no {quantity} column "
+            f"({accepted_names(quantity)})."
+        )
+    return mapped
+
+
+def read_test(
+    path: str | os.PathLike,
+    *,
+    columns: str | Sequence[str] | None = None,
+    skip_rows: int | None = None,
+    length_mm: float | None = None,
+    diameter_mm: float | None = None,
+    rate_mm_per_min: float | None = None,
+    temperature_C: float | None = None,
+    material: str | None = None,
+    id: str | None = None,
+    encoding: str | None = None,
+    delimiter: str | None = None,
+    detect_slack: bool = True,
+    slack_threshold_N: float | None = None,
+) -> TestData:
+    """Read one test from a canonical CSV file or a raw tensile-tester export.
+
+    The file may start with the canonical `# key: value` metadata lines. Then:
+
+    - *Separator*: comma, semicolon or tab, whichever splits most of the first lines
+        into numbers (a semicolon or tab file may write decimal commas, `1,5`).
+    - *Encoding*: UTF-8 (with or without byte-order mark), else GB18030 (GBK), else
+        latin-1, so a header in any encoding reads.
+    - *Rows to skip* (`skip_rows`): the lines before the first data row, found as the
+        first row of numbers (blank lines, preamble, header and unit rows skipped).
+        Quoted numbers and CRLF line ends are read as such.
+    - *Columns*: `columns` names every column of the file in order with its unit;
+        without it, a canonical header (`time_s,force_N,...`) is used, else a header
+        matched best-effort: names such as `Time`, `Force`/`Load`,
+        `Elongation`/`Extension`/`Displacement`, `Temperature` (also in Chinese,
+        e.g. 时间, 力, 位移), with units in the name (`Force (kN)`, `Time/s`) or in a
+        units row below (`(s),(mm),(N)`); a crosshead displacement is read as the
+        elongation, and unmatched columns are ignored. Otherwise it is an error
+        asking for `columns` (`--columns`).
+    - *Slack* (`detect_slack`): stretches where the force is about zero while the
+        crosshead moves are masked, and negative forces clipped to 0; see
+        [`jaxcable.mask_slack`][] for the rule. The result is in `mask`,
+        `force_raw` and `slack_report`.
+
+    **Arguments:**
+
+    - `path`: the file.
+    - `columns`: the file's columns in order, e.g. `"time_s,elongation_mm,force_N"`
+        (a string or a sequence of names). Accepted: `time_s`, `time_ms`, `time_min`,
+        `time_h`, `force_N`, `force_kN`, `elongation_mm`, `elongation_m`,
+        `temperature_C`, and `-` for a column to ignore (not parsed). Time and force
+        are required.
+    - `skip_rows`: the number of lines before the first data row, counted from the
+        top of the file (blank, metadata, preamble, header and unit lines alike);
+        `None` to detect it.
+    - `length_mm`, `diameter_mm`, `rate_mm_per_min`, `temperature_C`, `material`,
+        `id`: metadata that replace the file's (mm, mm, mm/min, °C). `length_mm` is
+        required, from the file or here.
+    - `encoding`: the file's encoding, or `None` to detect it.
+    - `delimiter`: the cell separator, or `None` to detect it.
+    - `detect_slack`: whether to detect and mask slack stretches.
+    - `slack_threshold_N`: the slack force threshold, N, or `None` for the default
+        rule.
+
+    **Returns:**
+
+    A [`jaxcable.TestData`][] in SI units (s, N, m; temperature in °C).
+
+    **Raises:**
+
+    `ValueError` naming the file, the 1-based line and the column (its position and
+    name) of the first problem: a missing column or cell, a non-numeric, empty, NaN
+    or infinite cell, time not strictly increasing (repeated time stamps included:
+    remove them from the file), a header that names no time and force column, or
+    no `length_mm`.
+    """
+    lines = read_lines(path, encoding)
+    metadata, first = parse_metadata(lines, path)
+    overrides = {
+        "length_mm": length_mm,
+        "diameter_mm": diameter_mm,
+        "rate_mm_per_min": rate_mm_per_min,
+        "temperature_C": temperature_C,
+        "material": material,
+        "id": id,
+    }
+    for key, value in overrides.items():
+        if value is not None:
+            metadata[key] = metadata_value(key, value, f"{path}, argument {key}")
+    if delimiter is None:
+        sep, decimal_comma = sniff_separator(lines, first)
+    else:
+        if (
+            not isinstance(delimiter, str)
+            or len(delimiter) != 1
+            or delimiter in '"\r\n'
+        ):
+            raise ValueError(
+                f"{path}: delimiter must be one character (not a quote or line "
+                f"break), got {delimiter!r}."
+            )
+        sep = delimiter
+        decimal_comma = sep != "," and sniff_separator(lines, first) == (sep, True)
+    spec = None if columns is None else _parse_columns_spec(columns, path)
+    if skip_rows is None:
+        start = find_data_start(lines, first, sep, decimal_comma, spec, path)
+    else:
+        if isinstance(skip_rows, bool) or not isinstance(skip_rows, int | np.integer):
+            raise ValueError(
+                f"{path}: skip_rows must be an integer, got {skip_rows!r}."
+            )
+        if not 0 <= skip_rows < len(lines):
+            raise ValueError(
+                f"{path}: skip_rows={skip_rows} is outside the file's {len(lines)} "
+                "lines."
+            )
+        start = int(skip_rows)
+    if spec is None:
+        column_map, header_line = header_columns(lines, first, start, sep, path)
+        named_by = "the header"
+    else:
+        column_map, header_line = spec, None
+        named_by = "columns"
+    values, line_numbers = parse_rows(
+        lines, start, column_map, path, sep, decimal_comma, named_by
+    )
+    data = assemble(path, column_map, values, line_numbers, metadata, header_line)
+    if detect_slack:
+        data = mask_slack(data, threshold_N=slack_threshold_N)
+    return data

@@ -1,0 +1,246 @@
+"""The layout of a raw tensile-tester export, sniffed: its separator (and whether it
+writes decimal commas), its first data row, and its columns from a free-form header
+(names such as `Force (kN)` or 时间 over a units row) matched best-effort."""
+
+import re
+
+from .parsing import ColumnMap, map_columns, parse_number, row_cells
+from .testdata import where
+from .units import COLUMNS, IGNORE, missing_quantities
+
+
+_SEPARATORS = {",": "comma", ";": "semicolon", "\t": "tab"}
+_COLUMNS_HINT = (
+    "pass columns=... (--columns on the command line) naming the file's columns in "
+    "order with their units, e.g. 'time_s,elongation_mm,force_N' ('-' for a column "
+    "to ignore)"
+)
+# Header words (lower case) for each quantity, for the best-effort header match. A
+# crosshead displacement is the cable's elongation when it starts at zero with the
+# test, as tensile testers zero it.
+_HEADER_WORDS = {
+    "time": ("time", "zeit", "temps", "tiempo", "时间", "時間"),
+    "force": ("force", "load", "kraft", "力", "负荷", "負荷", "载荷", "荷重"),
+    "elongation": (
+        "elongation",
+        "extension",
+        "displacement",
+        "stroke",
+        "crosshead",
+        "deformation",
+        "weg",
+        "位移",
+        "伸长",
+        "变形",
+        "行程",
+    ),
+    "temperature": ("temperature", "temp", "temperatur", "温度"),
+}
+# (quantity, unit as written, lower case) -> canonical column name.
+_HEADER_UNITS = {
+    **{("time", u): "time_s" for u in ("s", "sec", "secs", "second", "seconds", "秒")},
+    ("time", "ms"): "time_ms",
+    **{("time", u): "time_min" for u in ("min", "mins", "minute", "minutes", "分钟")},
+    **{("time", u): "time_h" for u in ("h", "hr", "hrs", "hour", "hours", "小时")},
+    ("force", "n"): "force_N",
+    ("force", "kn"): "force_kN",
+    ("elongation", "mm"): "elongation_mm",
+    ("elongation", "m"): "elongation_m",
+    **{
+        ("temperature", u): "temperature_C"
+        for u in ("c", "°c", "℃", "degc", "deg c", "celsius")
+    },
+}
+_ALL_UNITS = {unit for _, unit in _HEADER_UNITS}
+# `Name (unit)`, `Name [unit]`, also with full-width brackets.
+_BRACKETED_UNIT = re.compile(r"^(.*?)\s*[(\[（【]\s*([^)\]）】]*?)\s*[)\]）】]$")
+_NON_NUMBER_WORD = re.compile(r"[^\W\d_]", re.UNICODE)  # any letter
+
+
+def _is_number(cell: str, decimal_comma: bool) -> bool:
+    try:
+        parse_number(cell, decimal_comma)
+    except ValueError:
+        return False
+    return True
+
+
+def _all_numbers(cells: list[str], decimal_comma: bool) -> bool:
+    """Whether `cells` is a row of at least 2 numbers (for sniffing the separator)."""
+    return len(cells) >= 2 and all(_is_number(c, decimal_comma) for c in cells)
+
+
+def sniff_separator(lines: list[str], first: int) -> tuple[str, bool]:
+    """The separator (`,`, `;` or tab) and decimal-comma flag under which most of the
+    first 200 content lines are rows of numbers; `,` when none is."""
+    sample = []
+    for text in lines[first:]:
+        if text.strip() and not text.lstrip().startswith("#"):
+            sample.append(text)
+            if len(sample) == 200:
+                break
+    best = (0, ",", False)
+    for sep in _SEPARATORS:
+        # A decimal comma is only possible where the comma does not separate cells.
+        for decimal_comma in (False, True) if sep != "," else (False,):
+            count = sum(_all_numbers(row_cells(t, sep), decimal_comma) for t in sample)
+            if count > best[0]:
+                best = (count, sep, decimal_comma)
+    return best[1], best[2]
+
+
+def _looks_like_data(
+    cells: list[str], decimal_comma: bool, spec: list[ColumnMap] | None
+) -> bool:
+    """Whether a row is the first data row: numbers, without words.
+
+    A row with a bad number but no letters (`12..5`, an empty cell) counts as data,
+    so that it is reported as an error rather than skipped as preamble; `nan` and
+    `inf` count as numbers for the same reason.
+    """
+    if spec is not None:
+        positions = [i for i, c in enumerate(spec) if c.quantity != IGNORE]
+        if len(cells) <= max(positions):
+            return False
+        cells = [cells[i] for i in positions]
+    elif len(cells) < 2:
+        return False
+    numbers = 0
+    for cell in cells:
+        if _is_number(cell, decimal_comma):
+            numbers += 1
+        elif _NON_NUMBER_WORD.search(cell):
+            return False
+    return numbers > 0
+
+
+def _split_unit(cell: str) -> tuple[str, str | None]:
+    """`("Force", "kN")` from `Force (kN)`, `Force [kN]`, `Force/kN` or `Force_kN`."""
+    match = _BRACKETED_UNIT.match(cell)
+    if match:
+        return match.group(1).strip(), match.group(2).strip()
+    for mark in ("/", "_", " "):
+        if mark in cell:
+            name, unit = cell.rsplit(mark, 1)
+            if unit.strip().lower() in _ALL_UNITS:
+                return name.strip(), unit.strip()
+    return cell, None
+
+
+def _unit_cell(cell: str) -> str | None:
+    """The unit of a units-row cell (`(mm)`, `[s]`, `N`), or None if it is not one."""
+    bare = cell.strip().strip("()[]（）【】").strip()
+    return bare if bare.lower() in _ALL_UNITS else None
+
+
+def _header_quantity(name: str) -> str | None:
+    lowered = name.lower()
+    words = set(re.split(r"[\W_]+", lowered))
+    for quantity, vocabulary in _HEADER_WORDS.items():
+        for word in vocabulary:
+            if (word.isascii() and word in words) or (
+                not word.isascii() and word in lowered
+            ):
+                return quantity
+    return None
+
+
+def _match_header(
+    names: list[str], units: list[str] | None
+) -> tuple[list[ColumnMap] | None, str]:
+    """Best-effort column map of a non-canonical header (and units row).
+
+    **Returns:**
+
+    `(columns, why)`: the column map (unmatched columns ignored), or `None` and why
+    the header does not do.
+    """
+    mapped: list[ColumnMap] = []
+    seen: dict[str, str] = {}
+    for position, cell in enumerate(names, start=1):
+        name, unit = _split_unit(cell)
+        if unit is None and units is not None and position <= len(units):
+            unit = _unit_cell(units[position - 1])
+        quantity = _header_quantity(name)
+        token = None
+        if quantity is not None and unit is not None:
+            token = _HEADER_UNITS.get((quantity, unit.lower()))
+        if token is None:
+            mapped.append(ColumnMap(cell or IGNORE, IGNORE, 1.0, position))
+            continue
+        if quantity in seen:
+            return None, f"two {quantity} columns ('{seen[quantity]}' and '{cell}')"
+        seen[quantity] = cell
+        unit_info = COLUMNS[token]
+        mapped.append(ColumnMap(token, quantity, unit_info.to_si, position))
+    missing = missing_quantities(seen)
+    if missing:
+        return None, f"no {' and no '.join(missing)} column with a known unit"
+    return mapped, ""
+
+
+def header_columns(
+    lines: list[str], first: int, start: int, sep: str, path
+) -> tuple[list[ColumnMap], int]:
+    """The column map from the rows above the data (`lines[first:start]`).
+
+    A row with a canonical name (`time_s`, ...) is the canonical header. Otherwise,
+    from the bottom up, the first row whose names match a time and a force column
+    (`Time (s)`, `时间` over a units row `(s)`, ...) is used, its other columns
+    ignored.
+
+    **Returns:**
+
+    `(columns, header_line)`: the column map and the 1-based line of the header.
+    """
+    rows = [
+        (index, row_cells(lines[index], sep))
+        for index in range(first, start)
+        if lines[index].strip() and not lines[index].lstrip().startswith("#")
+    ]
+    if not rows:
+        raise ValueError(
+            f"{where(path, start + 1)}: no header above the first data row; "
+            f"{_COLUMNS_HINT}."
+        )
+    for index, names in rows:
+        if any(name in COLUMNS for name in names):
+            return map_columns(names, path, index + 1, positions=True), index + 1
+    unit_rows = {index for index, cells in rows if all(map(_unit_cell, cells))}
+    reasons = []
+    for k in range(len(rows) - 1, -1, -1):
+        index, names = rows[k]
+        if index in unit_rows:
+            continue
+        below = [cells for i, cells in rows[k + 1 :] if i in unit_rows]
+        columns, why = _match_header(names, below[0] if below else None)
+        if columns is not None:
+            return columns, index + 1
+        reasons.append((index, names, why))
+    index, names, why = reasons[0] if reasons else (rows[-1][0], rows[-1][1], "")
+    raise ValueError(
+        f"{where(path, index + 1)}: cannot tell the columns from the header "
+        f"{_SEPARATORS[sep]}-separated {names}{f' ({why})' if why else ''}; "
+        f"{_COLUMNS_HINT}."
+    )
+
+
+def find_data_start(
+    lines: list[str],
+    first: int,
+    sep: str,
+    decimal_comma: bool,
+    spec: list[ColumnMap] | None,
+    path,
+) -> int:
+    """0-based index of the first data row at or after `first`."""
+    for index in range(first, len(lines)):
+        text = lines[index]
+        if not text.strip() or text.lstrip().startswith("#"):
+            continue
+        if _looks_like_data(row_cells(text, sep), decimal_comma, spec):
+            return index
+    raise ValueError(
+        f"{path}: no data rows found (rows of numbers separated by "
+        f"{_SEPARATORS.get(sep, repr(sep))}s)."
+    )

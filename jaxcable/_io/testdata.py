@@ -1,0 +1,212 @@
+"""The measured test: [`jaxcable.TestData`][] (time-stamped force and elongation with the
+file's metadata), where its samples came from, and [`jaxcable.mask_slack`][], which
+masks the samples a slack cable gives."""
+
+import dataclasses
+
+import numpy as np
+
+from .._cable import Cable, speed_from_mm_per_min
+from .slack import SlackReport, detect_slack
+from .units import COLUMNS, QUANTITIES
+
+
+# The metadata keys that describe the cable, named as the arguments of
+# `Cable.from_mm`.
+_CABLE_KEYS = (
+    "length_mm",
+    "diameter_mm",
+    "rate_mm_per_min",
+    "temperature_C",
+    "breaking_load_N",
+)
+
+
+def where(path, line=None, column=None, position=None) -> str:
+    """The location prefix of every error message: file, 1-based line, column (its
+    1-based position in the row when known, and its name)."""
+    parts = [str(path)]
+    if line is not None:
+        parts.append(f"line {line}")
+    if column is not None:
+        number = "" if position is None else f"{position} "
+        parts.append(f"column {number}'{column}'")
+    return ", ".join(parts)
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class TestData:
+    """One measured or simulated cable test: a time-stamped force (and elongation)
+    history with its metadata, as read from or written to the canonical CSV file.
+
+    **Fields:**
+
+    - `time`: sample times, s.
+    - `force`: cable force, N.
+    - `elongation`: elongation, m, or `None` when the file has no elongation column.
+    - `temperature`: temperature at each sample, °C, or `None`.
+    - `extra`: any other columns, by their name in the file, values as in the file
+        (not converted); carried through on write.
+    - `metadata`: the `# key: value` block. `length_mm`, `diameter_mm`,
+        `rate_mm_per_min` and `temperature_C` are floats in the units their names say;
+        every other key (`material`, `id`, ...) is a string.
+    - `source`: the file the data were read from (for error messages), or `None`.
+    - `lines`: the 1-based line number of each sample in `source`, or `None`.
+    - `mask`: per sample, True where it is to be fitted, False where it is not (a
+        slack stretch, see [`jaxcable.mask_slack`][]). All True unless set. It weights
+        residuals only: the whole history, masked samples included, still drives a
+        simulation (with `force` there, which is never negative).
+    - `force_raw`: the force as measured, N, where `force` differs from it (negative
+        readings clipped to 0 by [`jaxcable.mask_slack`][]); `None` when `force` is
+        the measured force.
+    - `slack_report`: what [`jaxcable.mask_slack`][] found (a
+        [`jaxcable.SlackReport`][]), or `None` when it has not run (e.g.
+        [`jaxcable.read_csv`][]).
+    """
+
+    # pytest would otherwise try to collect this class wherever it is imported.
+    __test__ = False
+
+    time: np.ndarray
+    force: np.ndarray
+    elongation: np.ndarray | None = None
+    temperature: np.ndarray | None = None
+    extra: dict[str, np.ndarray] = dataclasses.field(default_factory=dict)
+    metadata: dict[str, float | str] = dataclasses.field(default_factory=dict)
+    source: str | None = None
+    lines: np.ndarray | None = None
+    mask: np.ndarray | None = None
+    force_raw: np.ndarray | None = None
+    slack_report: SlackReport | None = None
+
+    def __post_init__(self):
+        arrays = {"time": self.time, "force": self.force}
+        for name in ("elongation", "temperature", "force_raw"):
+            if getattr(self, name) is not None:
+                arrays[name] = getattr(self, name)
+        for name, value in self.extra.items():
+            arrays[f"extra[{name!r}]"] = value
+        converted = {}
+        for name, value in arrays.items():
+            v = np.asarray(value, dtype=float)
+            if v.ndim != 1:
+                raise ValueError(
+                    f"TestData `{name}` must be 1-dimensional, got shape {v.shape}."
+                )
+            converted[name] = v
+        lengths = {name: v.shape[0] for name, v in converted.items()}
+        if len(set(lengths.values())) != 1:
+            raise ValueError(f"TestData columns differ in length: {lengths}.")
+        if lengths["time"] == 0:
+            raise ValueError("TestData needs at least one sample.")
+        for name in (*QUANTITIES, "force_raw"):
+            if name in converted:
+                object.__setattr__(self, name, converted[name])
+        if self.mask is None:
+            mask = np.ones(lengths["time"], dtype=bool)
+        else:
+            mask = np.asarray(self.mask, dtype=bool)
+            if mask.shape != (lengths["time"],):
+                raise ValueError(
+                    f"TestData `mask` must have shape ({lengths['time']},) like "
+                    f"`time`, got {mask.shape}."
+                )
+        object.__setattr__(self, "mask", mask)
+        canonical = set(COLUMNS)
+        extra = {}
+        for name in self.extra:
+            if name in canonical:
+                raise ValueError(
+                    f"TestData extra column '{name}' is a canonical column; set the "
+                    f"`{COLUMNS[name].quantity}` field instead."
+                )
+            extra[name] = converted[f"extra[{name!r}]"]
+        object.__setattr__(self, "extra", extra)
+        object.__setattr__(self, "metadata", dict(self.metadata))
+        if self.lines is not None:
+            object.__setattr__(self, "lines", np.asarray(self.lines, dtype=int))
+
+    @property
+    def num_samples(self) -> int:
+        """The number of samples (rows)."""
+        return int(self.time.shape[0])
+
+    def cable(self) -> Cable:
+        """The [`jaxcable.Cable`][] described by the metadata, in SI.
+
+        `length_mm` is required; `diameter_mm` defaults to 3 mm and `rate_mm_per_min`
+        (the crosshead speed) to 3 mm/min, Park's Dyneema SK78 test. The temperature
+        is the metadata's `temperature_C`, else the mean of the temperature column,
+        else the `Cable` default (20 °C); the breaking load is `breaking_load_N` when
+        given, else the `Cable` default.
+
+        **Returns:**
+
+        A [`jaxcable.Cable`][] with `length` and `diameter` in m and `speed` in m/s.
+        """
+        if "length_mm" not in self.metadata:
+            raise ValueError(
+                f"{where(self.source or '<TestData>')}: metadata has no 'length_mm' "
+                "(the free length of the cable, mm)."
+            )
+        mm = {
+            key: float(self.metadata[key])
+            for key in _CABLE_KEYS
+            if key in self.metadata
+        }
+        if "temperature_C" not in mm and self.temperature is not None:
+            mm["temperature_C"] = float(np.mean(self.temperature))
+        return Cable.from_mm(**mm)
+
+    def locate(self, index: int, column: str | None = None) -> str:
+        """Where sample `index` came from: `file, line N, column 'name'` (for errors)."""
+        if self.lines is None:
+            place = where(self.source or "<TestData>", column=column)
+            return f"{place}, sample {index}"
+        return where(self.source, int(self.lines[index]), column)
+
+
+def mask_slack(data: TestData, *, threshold_N: float | None = None) -> TestData:
+    """Detect the slack stretches of a test, mask them and clip negative forces.
+
+    A slack stretch is a run of samples with the force below a threshold while the
+    crosshead keeps moving (the elongation changes at the test's speed and by at
+    least 2 % of the test's range). The threshold is `max(0.5 % of the peak force,
+    3 x the force noise)`, capped at 5 % of the peak; the noise is the robust
+    standard deviation of the force's second differences. Samples in slack
+    stretches, and any sample with the force below minus the threshold, are masked
+    (`mask` False): they are not fitted. Every negative force is set to 0 in `force`
+    (the kernels reject negative forces, and a slack cable carries none); the
+    measured force is kept in `force_raw`. The full rule and its constants are in
+    the docstring of the slack-detection module (`jaxcable._io.slack`).
+
+    **Arguments:**
+
+    - `data`: a [`jaxcable.TestData`][]; detection reads `force_raw` when set (so it
+        can be re-run) and the crosshead speed from `rate_mm_per_min` when the
+        metadata has it (else it is estimated from the elongation).
+    - `threshold_N`: the force threshold, N, or `None` for the rule above.
+
+    **Returns:**
+
+    A new [`jaxcable.TestData`][] with `mask`, `force`, `force_raw` and
+    `slack_report` (a [`jaxcable.SlackReport`][]) set; any previous mask is replaced.
+    """
+    measured = data.force if data.force_raw is None else data.force_raw
+    rate = data.metadata.get("rate_mm_per_min")
+    speed = None if rate is None else speed_from_mm_per_min(float(rate))
+    mask, force, report = detect_slack(
+        data.time,
+        measured,
+        data.elongation,
+        speed=speed,
+        threshold=threshold_N,
+        lines=data.lines,
+    )
+    return dataclasses.replace(
+        data,
+        force=force,
+        force_raw=measured if report.clipped else None,
+        mask=mask,
+        slack_report=report,
+    )
