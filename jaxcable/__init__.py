@@ -39,10 +39,9 @@ from ._fit.fit import (
     pad_tests as pad_tests,
     residuals as residuals,
 )
-from ._io.readers import (
+from ._io import (
     SlackReport as SlackReport,
     SlackStretch as SlackStretch,
-    Test as Test,
     TestData as TestData,
     mask_slack as mask_slack,
     read_csv as read_csv,

@@ -219,16 +219,15 @@ def test_read_test_overrides_file_metadata(tmp_path):
         jc.read_test(path, length_mm=-1)
 
 
-def test_test_alias_and_mask_fields():
-    assert jc.Test is jc.TestData
-    assert jc.Test.__test__ is False  # pytest must not collect it
-    data = jc.Test(time=[0.0, 1.0, 2.0], force=[0.0, 1.0, 2.0])
+def test_testdata_mask_fields():
+    assert jc.TestData.__test__ is False  # pytest must not collect it
+    data = jc.TestData(time=[0.0, 1.0, 2.0], force=[0.0, 1.0, 2.0])
     np.testing.assert_array_equal(data.mask, [True, True, True])
     assert data.force_raw is None and data.slack_report is None
-    masked = jc.Test(time=[0.0, 1.0], force=[0.0, 1.0], mask=[1, 0])
+    masked = jc.TestData(time=[0.0, 1.0], force=[0.0, 1.0], mask=[1, 0])
     assert masked.mask.dtype == bool
     np.testing.assert_array_equal(masked.mask, [True, False])
     with pytest.raises(ValueError, match="mask"):
-        jc.Test(time=[0.0, 1.0], force=[0.0, 1.0], mask=[True])
+        jc.TestData(time=[0.0, 1.0], force=[0.0, 1.0], mask=[True])
     with pytest.raises(ValueError, match="differ in length"):
-        jc.Test(time=[0.0, 1.0], force=[0.0, 1.0], force_raw=[0.0])
+        jc.TestData(time=[0.0, 1.0], force=[0.0, 1.0], force_raw=[0.0])

@@ -309,7 +309,7 @@ def test_slack_start_and_threshold_override():
     x = t * 1e-3
     noise = 0.002 * np.random.default_rng(0).standard_normal(t.size)
     f = np.where(x < 3e-3, 0.0, 50.0 * (x - 3e-3) / 17e-3) + noise
-    data = jc.mask_slack(jc.Test(time=t, force=f, elongation=x))
+    data = jc.mask_slack(jc.TestData(time=t, force=f, elongation=x))
     (stretch,) = data.slack_report.stretches
     assert stretch.start == 0 and stretch.lines is None
     assert 29 <= stretch.stop <= 32  # 3 mm at 0.1 mm per sample
@@ -319,7 +319,9 @@ def test_slack_start_and_threshold_override():
     assert data.slack_report.threshold == pytest.approx(0.005 * f.max())
     assert data.slack_report.noise == pytest.approx(0.002, rel=0.3)
     # A threshold above every force masks the moving test entirely.
-    everything = jc.mask_slack(jc.Test(time=t, force=f, elongation=x), threshold_N=100)
+    everything = jc.mask_slack(
+        jc.TestData(time=t, force=f, elongation=x), threshold_N=100
+    )
     assert not everything.mask.any()
 
 
@@ -332,7 +334,7 @@ def test_not_slack_valleys_rests_and_noise():
     t_cycles = np.concatenate([[0.0], np.cumsum(np.abs(np.diff(e_cycles)) / 5e-5)])
     t_rest = t_cycles[-1] + np.geomspace(10, 86400, 24)
     e_rest = e_cycles[-1] * (0.5 + 0.5 * np.exp(-(t_rest - t_cycles[-1]) / 3600))
-    data = jc.Test(
+    data = jc.TestData(
         time=np.concatenate([t_cycles, t_rest]),
         force=np.concatenate([f_cycles, np.zeros(24)]),
         elongation=np.concatenate([e_cycles, e_rest]),
@@ -351,7 +353,7 @@ def test_not_slack_valleys_rests_and_noise():
     f[100] = -5.0
     f[-1] = -0.1
     e = 1e-5 * np.abs(f)
-    result = jc.mask_slack(jc.Test(time=np.arange(f.size), force=f, elongation=e))
+    result = jc.mask_slack(jc.TestData(time=np.arange(f.size), force=f, elongation=e))
     assert result.slack_report.negative == 1 and result.slack_report.clipped == 2
     assert np.flatnonzero(~result.mask).tolist() == [100]
     assert result.force[100] == 0 and result.force[-1] == 0
@@ -359,7 +361,7 @@ def test_not_slack_valleys_rests_and_noise():
 
 def test_force_without_elongation_only_masks_negative_readings():
     f = np.array([0.0, 10.0, -3.0, 10.0, -0.01, 0.0])
-    data = jc.mask_slack(jc.Test(time=np.arange(6.0), force=f))
+    data = jc.mask_slack(jc.TestData(time=np.arange(6.0), force=f))
     assert np.flatnonzero(~data.mask).tolist() == [2]
     assert data.slack_report.speed is None and data.slack_report.clipped == 2
 
