@@ -14,12 +14,19 @@ class Progress:
     without a known number of steps (one compiled fit) shows the elapsed time, redrawn
     by a background thread.
 
+    The bar reads `label [####....] done/total 12 s` (with `eta`, then `ETA 30 s`),
+    then the note of the last step.
+
     **Arguments:**
 
     - `label`: what is being done, e.g. `"reading"`.
     - `total`: the number of steps, or `None` for a spinner with the elapsed time.
     - `enabled`: whether to draw at all.
     - `stream`: where to draw (default `sys.stderr`).
+    - `eta`: with `total`, show the estimated time left, from the mean time of the
+        steps after the first one (which, in jitted work, includes the compilation).
+    - `keep`: at the end, leave the last line on the stream (ended by a newline)
+        instead of erasing it.
     """
 
     _WIDTH = 24
@@ -32,13 +39,19 @@ class Progress:
         *,
         enabled: bool = True,
         stream: TextIO | None = None,
+        eta: bool = False,
+        keep: bool = False,
     ):
         self.label = label
         self.total = total
         self.enabled = enabled
         self.stream = sys.stderr if stream is None else stream
+        self.eta = eta
+        self.keep = keep
         self.done = 0
         self.start = time.monotonic()
+        # When the first step ended, and how many steps it counted (for the ETA).
+        self._first: tuple[float, int] | None = None
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._thread = None
@@ -58,18 +71,23 @@ class Progress:
     def advance(self, steps: int = 1, note: str = "") -> None:
         """Count `steps` more steps done; `note` (e.g. a file name) is shown."""
         self.done += steps
+        if self._first is None:
+            self._first = (time.monotonic(), self.done)
         if self.enabled:
             self._draw(note)
 
     def close(self) -> None:
-        """Stop and erase the bar."""
+        """Stop and erase the bar (with `keep`, end its line instead)."""
         self._stop.set()
         if self._thread is not None:
             self._thread.join()
             self._thread = None
         if self.enabled:
             with self._lock:
-                self.stream.write("\r" + " " * self._width + "\r")
+                if self.keep:
+                    self.stream.write("\n")
+                else:
+                    self.stream.write("\r" + " " * self._width + "\r")
                 self.stream.flush()
             self.enabled = False
 
@@ -77,8 +95,17 @@ class Progress:
         while not self._stop.wait(0.25):
             self._draw()
 
+    def _time_left(self, now: float) -> str:
+        # The first step is left out of the rate: it includes the compilation.
+        if self._first is None or self.done <= self._first[1]:
+            return "?"
+        first_time, first_done = self._first
+        rate = (now - first_time) / (self.done - first_done)
+        return f"{rate * max(self.total - self.done, 0):.0f} s"
+
     def _draw(self, note: str = "") -> None:
-        elapsed = time.monotonic() - self.start
+        now = time.monotonic()
+        elapsed = now - self.start
         if self.total:
             filled = int(self._WIDTH * min(self.done, self.total) / self.total)
             bar = "#" * filled + "." * (self._WIDTH - filled)
@@ -87,6 +114,8 @@ class Progress:
             spin = self._SPIN[int(elapsed * 4) % len(self._SPIN)]
             text = f"{self.label} {spin}"
         text += f" {elapsed:.0f} s"
+        if self.eta and self.total:
+            text += f" ETA {self._time_left(now)}"
         if note:
             text += f"  {note}"
         text = text[:100]
