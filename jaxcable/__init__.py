@@ -91,7 +91,7 @@ from ._models.piao_surface import (
     ParameterSurface as ParameterSurface,
     piao_five_element as piao_five_element,
 )
-from ._montecarlo.montecarlo import (
+from ._montecarlo import (
     AbstractDistribution as AbstractDistribution,
     AbstractParameterSampler as AbstractParameterSampler,
     CorrelatedParameters as CorrelatedParameters,

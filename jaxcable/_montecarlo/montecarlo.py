@@ -15,17 +15,8 @@ from jaxtyping import Array, Float, Int, PRNGKeyArray
 from .._cable import Cable
 from .._drive import Protocol
 from .._progress import Progress
-
-# The folder's public names are importable from this module too (`jaxcable/__init__.py`
-# takes them from here).
-from .distributions import (
-    AbstractDistribution as AbstractDistribution,
-    LogNormal as LogNormal,
-    Normal as Normal,
-    Uniform as Uniform,
-)
 from .inputs import (
-    ForceHistory as ForceHistory,
+    ForceHistory,
     check_cables,
     check_devices,
     check_int,
@@ -33,11 +24,7 @@ from .inputs import (
     check_loads,
     check_percentiles,
 )
-from .samplers import (
-    AbstractParameterSampler as AbstractParameterSampler,
-    CorrelatedParameters as CorrelatedParameters,
-    IndependentParameters as IndependentParameters,
-)
+from .samplers import AbstractParameterSampler
 from .sharding import (
     AXIS,
     STATUS_NAMES,
