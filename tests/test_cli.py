@@ -9,8 +9,10 @@ import numpy as np
 import pytest
 
 import jaxcable as jc
-from jaxcable import _cli, _synthetic
+from jaxcable._cli import demo as cli_demo
 from jaxcable._cli.main import main
+from jaxcable._models import BY_CLI_NAME
+from jaxcable._papers import synthetic as _synthetic
 
 
 # One load-unload-reload history; every simulate test uses this length so that the
@@ -129,14 +131,6 @@ def test_simulate_bad_params(tmp_path, capsys, params, expected):
     assert main([*args, "--out", str(tmp_path / "out.csv")]) == 2
     message = _one_error_line(capsys.readouterr().err)
     assert str(path) in message and expected in message
-
-
-def test_simulate_model_not_available(tmp_path, capsys, monkeypatch):
-    monkeypatch.setitem(_cli._MODELS, "maxwell", "MaxwellModel")
-    args = ["simulate", str(_history(tmp_path)), "--model", "maxwell"]
-    assert main([*args, "--out", str(tmp_path / "out.csv")]) == 2
-    message = _one_error_line(capsys.readouterr().err)
-    assert "jaxcable.MaxwellModel" in message
 
 
 @pytest.mark.parametrize(
@@ -798,7 +792,7 @@ def test_demo_history_resimulates(demo_run, tmp_path):
 
 
 def test_demo_without_data(tmp_path, capsys, monkeypatch):
-    monkeypatch.setattr(_cli, "_bundled_files", lambda: [])
+    monkeypatch.setattr(cli_demo, "_bundled_files", lambda: [])
     out = tmp_path / "demo_out"
     assert main(["demo", "--out", str(out)]) == 1
     message = _one_error_line(capsys.readouterr().err)
@@ -814,13 +808,13 @@ def test_demo_without_data(tmp_path, capsys, monkeypatch):
 @pytest.mark.slow
 def test_demo_bundled_data(tmp_path):
     """`make demo` as shipped: the bundled data set, the default fit."""
-    if not _cli._bundled_files():
+    if not cli_demo._bundled_files():
         pytest.skip("jaxcable/data/ has no bundled data set yet")
     status, stdout, stderr = _run(["demo", "--out", tmp_path / "demo_out"])
     assert status == 0, stderr
     result = jc.FitResult.from_json(tmp_path / "demo_out" / "params.json")
     assert result.converged
-    assert len(result.test_ids) == len(_cli._bundled_files())
+    assert len(result.test_ids) == len(cli_demo._bundled_files())
     assert "Wrote" in stdout
     # Step 3: the diagnosis names the effect hidden in the bundled data.
     doc = json.loads(
@@ -830,15 +824,15 @@ def test_demo_bundled_data(tmp_path):
     assert "named cause: termination_compliance" in stdout
 
 
-@pytest.mark.parametrize("name", list(_cli._MODELS))
+@pytest.mark.parametrize("name", list(BY_CLI_NAME))
 def test_every_registered_model_resolves(name):
-    cls = _cli._model_class(name)
+    cls = BY_CLI_NAME[name].cls
     assert issubclass(cls, jc.AbstractCableModel)
     cls()  # the CLI builds every model from its defaults
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", list(_cli._MODELS))
+@pytest.mark.parametrize("name", list(BY_CLI_NAME))
 def test_every_model_simulates_a_protocol(tmp_path, name):
     src = tmp_path / "protocol.json"
     src.write_text(json.dumps(_PROTOCOL))

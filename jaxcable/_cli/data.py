@@ -1,0 +1,103 @@
+"""The measured tests of `jaxcable fit`, `jaxcable diagnose` and `jaxcable demo`: read
+with the data options, thinned, and described in one line per file."""
+
+import dataclasses
+import pathlib
+from collections.abc import Sequence
+
+import numpy as np
+
+from .._io import TestData, read_test
+from .._progress import Progress
+from .common import CliError
+
+
+def data_options(args) -> dict:
+    """`read_test` keyword arguments from the data options of the command line."""
+    return dict(
+        columns=args.columns,
+        skip_rows=args.skip_rows,
+        length_mm=args.length_mm,
+        diameter_mm=args.diameter_mm,
+        rate_mm_per_min=args.rate_mm_per_min,
+        detect_slack=not args.no_slack,
+    )
+
+
+def _thin(data: TestData, every: int) -> TestData:
+    """Every `every`-th sample of `data` (the first and last kept)."""
+    if every <= 1:
+        return data
+    index = np.arange(0, data.num_samples, every)
+    if index[-1] != data.num_samples - 1:
+        index = np.append(index, data.num_samples - 1)
+
+    def take(x):
+        return None if x is None else np.asarray(x)[index]
+
+    return dataclasses.replace(
+        data,
+        time=data.time[index],
+        force=data.force[index],
+        elongation=take(data.elongation),
+        temperature=take(data.temperature),
+        extra={k: v[index] for k, v in data.extra.items()},
+        lines=take(data.lines),
+        mask=data.mask[index],
+        force_raw=take(data.force_raw),
+    )
+
+
+def read_tests(
+    paths: Sequence, options: dict, every: int, progress: bool
+) -> list[TestData]:
+    """Measured tests, read with `read_test` (canonical or raw exports).
+
+    **Arguments:**
+
+    - `paths`: the files.
+    - `options`: `read_test` keyword arguments ([`data_options`][]).
+    - `every`: keep every `every`-th sample (the first and last kept).
+    - `progress`: whether to draw a progress bar.
+
+    **Returns:**
+
+    The tests, each with its elongation and a cable; fails naming the file otherwise.
+    """
+    tests = []
+    with Progress("reading", len(paths), enabled=progress) as bar:
+        for path in paths:
+            data = read_test(path, **options)
+            if data.elongation is None:
+                raise CliError(
+                    f"{path}: no elongation column; a fit needs the measured "
+                    "elongation (a column elongation_mm, or name it with --columns)."
+                )
+            data.cable()  # raises, naming the file, when length_mm is missing
+            tests.append(_thin(data, every))
+            bar.advance(note=pathlib.Path(path).name)
+    return tests
+
+
+def describe_tests(tests: Sequence[TestData], every: int) -> list[str]:
+    """One line per test: its name, samples, and what was masked as slack."""
+    lines = []
+    for t in tests:
+        name = pathlib.Path(t.source).name if t.source else t.metadata.get("id", "")
+        masked = int(np.sum(~t.mask))
+        text = f"  {name}: {t.num_samples} samples"
+        if every > 1:
+            text += f" (1 in {every} kept)"
+        if masked:
+            text += f", {masked} masked"
+        report = t.slack_report
+        if report is not None and report.stretches:
+            where = ", ".join(
+                f"lines {s.lines[0]}-{s.lines[1]}"
+                if s.lines is not None
+                else f"samples {s.start}-{s.stop - 1}"
+                for s in report.stretches
+            )
+            text += f" (slack: {where})"
+        lines.append(text)
+    return lines

@@ -1,0 +1,363 @@
+"""`jaxcable demo`: Park et al.'s tests simulated, a fit of the bundled data set, and
+the diagnosis of what that fit gets wrong.
+
+The demo's two plots (simulated force vs elongation and elongation vs time, several
+cases overlaid) are its own: the report's plots show measured tests against a fit.
+"""
+
+import contextlib
+import importlib.resources
+import os
+import pathlib
+import sys
+from typing import NamedTuple
+
+import jax
+import numpy as np
+
+from .._cable import Cable
+from .._diagnose import write_diagnosis_report
+from .._drive import Protocol, simulate_rate_test
+from .._io import TestData, write_csv
+from .._models import PARK_IDENTIFIABLE, IntegratedModel
+from .._report import write_report
+from .._results import RESULTS
+from .common import CliError, make_folder, one_line, show_progress
+from .data import read_tests
+from .diagnose import run_diagnosis
+from .fit import fit_failure, run_fit
+from .models import names_option, parameter_names
+
+
+class _Case(NamedTuple):
+    name: str
+    label: str
+    group: str
+    force_max: float  # N
+    cycles: int
+    rate: float  # mm/min
+
+
+_LENGTH_MM = 300.0
+_DIAMETER_MM = 3.0
+# Park et al. Section 4: the rate effect (Fig. 3) and 10-cycle tests (Fig. 4).
+_CASES = (
+    _Case("rate_3mm_per_min", "3 mm/min", "rate", 100.0, 1, 3.0),
+    _Case("rate_50mm_per_min", "50 mm/min", "rate", 100.0, 1, 50.0),
+    _Case("cycles10_100N", "100 N", "cycles", 100.0, 10, 3.0),
+    _Case("cycles10_150N", "150 N", "cycles", 150.0, 10, 3.0),
+)
+_PLOTS = {
+    "rate": (
+        "rate_effect.png",
+        "Rate effect: 300 mm, 0-100 N, one cycle (Park Fig. 3)",
+    ),
+    "cycles": (
+        "cycles10.png",
+        "10 cycles at 3 mm/min, 300 mm (Park Fig. 4)",
+    ),
+}
+
+
+class _Simulated(NamedTuple):
+    case: _Case
+    time: np.ndarray  # s
+    force: np.ndarray  # N
+    elongation: np.ndarray  # mm
+    residual: float  # mm, at the end of the first unloading
+    error: str  # "" when successful
+
+
+def _simulate_case(
+    model, case: _Case, samples_per_ramp: int, samples: int
+) -> _Simulated:
+    cable = Cable(
+        length=_LENGTH_MM * 1e-3,
+        diameter=_DIAMETER_MM * 1e-3,
+        speed=case.rate * 1e-3 / 60,
+    )
+    # Padded to a common length so that all cases share one compilation.
+    protocol = Protocol.cycles(
+        case.force_max, case.cycles, samples_per_ramp=samples_per_ramp
+    ).pad(samples)
+    traj = simulate_rate_test(model, cable, protocol, throw=False)
+    error = ""
+    if traj.result != RESULTS.successful:
+        error = RESULTS[traj.result]
+    valid = np.asarray(traj.mask)
+    elongation = np.asarray(traj.elongation)[valid] * 1e3
+    # Sample 0 is the unloaded start; the first unloading ends 2 ramps later.
+    residual = float(elongation[2 * samples_per_ramp])
+    return _Simulated(
+        case,
+        np.asarray(traj.time)[valid],
+        np.asarray(traj.force)[valid],
+        elongation,
+        residual,
+        error,
+    )
+
+
+def _plot(path: pathlib.Path, title: str, results: list[_Simulated]) -> None:
+    """Force vs elongation and elongation vs time of `results`, side by side."""
+    # The object-oriented API, not pyplot: no global backend or figure state, and
+    # Figure.savefig renders PNG with Agg.
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(10, 4), layout="constrained")
+    ax_f, ax_t = fig.subplots(1, 2)
+    for r in results:
+        if r.error:
+            # Keep a failed case visible in the legend rather than silently absent.
+            ax_f.plot([], [], " ", label=f"{r.case.label}: failed")
+            continue
+        ax_f.plot(r.elongation, r.force, label=r.case.label)
+        ax_t.plot(r.time / 60, r.elongation, label=r.case.label)
+    ax_f.set_xlabel("elongation [mm]")
+    ax_f.set_ylabel("force [N]")
+    ax_f.set_title("force vs elongation")
+    ax_t.set_xlabel("time [min]")
+    ax_t.set_ylabel("elongation [mm]")
+    ax_t.set_title("elongation vs time")
+    for ax in (ax_f, ax_t):
+        ax.grid(alpha=0.3)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend()
+    fig.suptitle(title)
+    fig.savefig(path, dpi=100)
+
+
+def _bundled_files() -> list:
+    """The bundled data set's CSV files (`jaxcable/data/*.csv`), sorted by name."""
+    folder = importlib.resources.files("jaxcable").joinpath("data")
+    if not folder.is_dir():
+        return []
+    return sorted(
+        (p for p in folder.iterdir() if p.name.endswith(".csv")), key=lambda p: p.name
+    )
+
+
+def _data(args) -> tuple[list, str]:
+    """(files, description) of the data set the demo fits; fails when it is empty."""
+    if args.data is not None:
+        folder = pathlib.Path(args.data)
+        if not folder.is_dir():
+            raise CliError(f"--data {args.data}: not a folder.")
+        files = sorted(folder.glob("*.csv"))
+        if not files:
+            raise CliError(f"--data {args.data}: no *.csv files in this folder.")
+        return files, str(folder)
+    files = _bundled_files()
+    if not files:
+        raise CliError(
+            "the bundled data set is missing: jaxcable/data/ has no *.csv files. In a "
+            "source checkout, make it with 'python scripts/make_bundled_data.py', or "
+            "pass --data DIR (a folder of canonical CSV files).",
+            status=1,
+        )
+    return files, "the bundled data set (jaxcable/data/, synthetic)"
+
+
+def _simulate(args, out: pathlib.Path) -> tuple[list, list[pathlib.Path]]:
+    """Step 1: Park's tests simulated, written as CSV files and two plots."""
+    model = IntegratedModel()
+    spr = args.samples_per_ramp
+    samples = 1 + 2 * spr * max(c.cycles for c in _CASES)
+    results = [_simulate_case(model, c, spr, samples) for c in _CASES]
+
+    written = []
+    for r in results:
+        if r.error:
+            continue
+        data = TestData(
+            time=r.time,
+            force=r.force,
+            elongation=r.elongation * 1e-3,
+            metadata={
+                "id": r.case.name,
+                "material": "Dyneema SK78",
+                "length_mm": _LENGTH_MM,
+                "diameter_mm": _DIAMETER_MM,
+                "rate_mm_per_min": r.case.rate,
+                "protocol": f"{r.case.cycles} x 0-{r.case.force_max:g} N",
+                "model": "integrated (default parameters), simulated by jaxcable demo",
+            },
+        )
+        path = out / f"{r.case.name}.csv"
+        write_csv(path, data)
+        written.append(path)
+    for group, (filename, title) in _PLOTS.items():
+        path = out / filename
+        _plot(path, title, [r for r in results if r.case.group == group])
+        written.append(path)
+
+    print(
+        "1. Park et al.'s tests simulated with jaxcable.IntegratedModel() (Dyneema "
+        f"SK78, {_DIAMETER_MM:g} mm, {_LENGTH_MM:g} mm long, "
+        f"{args.samples_per_ramp} samples per ramp):"
+    )
+    print(f"  {'case':<20} {'peak [mm]':>10} {'residual after 1st unloading [mm]':>34}")
+    for r in results:
+        if r.error:
+            print(f"  {r.case.name:<20} FAILED: {one_line(r.error)}")
+        else:
+            peak = float(np.max(r.elongation))
+            print(f"  {r.case.name:<20} {peak:>10.3f} {r.residual:>34.3f}")
+    return results, written
+
+
+def _print_fit(args, result, num_tests: int, source: str, notes: list[str]) -> None:
+    """The headline numbers of step 2: RMSE per test, parameters, warnings."""
+    n = int(np.sum(result.num_samples))
+    print()
+    print(
+        f"2. jaxcable.IntegratedModel fitted to {source}: {num_tests} tests, {n} "
+        f"samples, multi-start x{args.starts}"
+        + (f", 1 sample in {args.every}" if args.every > 1 else "")
+        + "."
+    )
+    for note in notes[1:]:
+        print(f"  Note: {note}.")
+    print(
+        f"  RMSE per test {np.min(result.rmse_mm):.3g}-{np.max(result.rmse_mm):.3g} "
+        f"mm ({np.min(result.rmse_percent):.3g}-{np.max(result.rmse_percent):.3g} % "
+        "of the peak elongation); "
+        + (
+            f"converged in {result.num_steps} steps."
+            if result.converged
+            else f"NOT converged ({result.message})."
+        )
+    )
+    print(f"  {'test':<30} {'RMSE [mm]':>10} {'RMSE [%]':>9}")
+    for tid, mm, pct in zip(result.test_ids, result.rmse_mm, result.rmse_percent):
+        print(f"  {tid[:30]:<30} {mm:>10.4f} {pct:>9.2f}")
+    print(f"  {'parameter':<10} {'value':>12} {'± std err':>11}  unit")
+    for p, v, s, u in zip(result.names, result.values, result.stderr, result.units):
+        print(f"  {p:<10} {v:>12.5g} {s:>11.3g}  {u}")
+    if result.warnings:
+        print("  Identifiability warnings:")
+        for w in result.warnings:
+            print(f"    - {w}")
+    if source.startswith("the bundled"):
+        print(
+            "  The data are synthetic: the model's defaults plus noise and one "
+            "physical effect the model lacks (scripts/make_bundled_data.py), so the "
+            "fit is imperfect by design: the residuals show what is missing."
+        )
+
+
+def _fit(args, out: pathlib.Path, files: list, source: str, progress: bool):
+    """Step 2: the integrated model fitted to the data set, with its report."""
+    model = IntegratedModel()
+    # By default the identifiable Park parameters; the other four keep their defaults:
+    # with all twelve free the fit does not converge within the demo's time.
+    names = (
+        names_option(args.fit, "--fit", model, "integrated")
+        if args.fit
+        else list(PARK_IDENTIFIABLE)
+    )
+    with contextlib.ExitStack() as stack:
+        # The bundled files may live in a zip: made real files while they are read.
+        paths = [
+            stack.enter_context(importlib.resources.as_file(f))
+            if not isinstance(f, pathlib.Path)
+            else f
+            for f in files
+        ]
+        tests = read_tests(paths, {}, args.every, progress)
+    result = run_fit(
+        model,
+        "integrated",
+        tests,
+        fit_names=names,
+        per_test=[],
+        args=args,
+        progress=progress,
+    )
+    failure = fit_failure(result)
+    if failure is not None and not np.isfinite(result.loss):
+        raise failure
+    all_names = parameter_names(model)
+    fixed = [n for n in all_names if n not in names]
+    notes = [f"data: {source}, {len(tests)} tests"]
+    if fixed:
+        notes.append(
+            f"fitted {len(names)} of {len(all_names)} parameters; "
+            f"{', '.join(fixed)} kept at the defaults of IntegratedModel() "
+            "(with all twelve free the fit does not converge within the demo's time)"
+        )
+    if args.every > 1:
+        notes.append(f"1 sample in {args.every} fitted (--every)")
+    params = out / "params.json"
+    result.to_json(params)
+    written = write_report(
+        out,
+        result,
+        tests,
+        title="jaxcable demo: IntegratedModel fitted to the bundled data set",
+        notes=notes,
+        progress=progress,
+    )
+    _print_fit(args, result, len(tests), source, notes)
+    return failure, [params, *written], tests
+
+
+def _diagnose(args, out: pathlib.Path, tests, progress: bool):
+    """Step 3: `jaxcable diagnose` on the same tests, report in `out/diagnosis/`."""
+    print()
+    print(
+        "3. What the fit gets wrong: jaxcable diagnose (every candidate extension "
+        "fitted, scored on the last 30 % of every test, held out)."
+    )
+    diagnosis = run_diagnosis(
+        IntegratedModel(),
+        "integrated",
+        tests,
+        progress=progress,
+        log=sys.stdout,
+        fit_names=args.fit.split(",") if args.fit else None,
+        candidates=None,
+        split="time",
+        holdout=0.3,
+        folds=None,
+        multistart=1,
+        max_steps=args.max_steps,
+        key=jax.random.key(args.seed),
+    )
+    print()
+    print(diagnosis.summary())
+    folder = out / "diagnosis"
+    written = write_diagnosis_report(folder, diagnosis, tests)
+    print(f"  wrote the diagnosis report to {folder}{os.sep}")
+    return written
+
+
+def demo_command(args) -> int:
+    """Run `jaxcable demo` with the parsed command line `args`; the exit status."""
+    if args.samples_per_ramp < 2:
+        raise CliError(
+            f"--samples-per-ramp must be at least 2, got {args.samples_per_ramp}."
+        )
+    progress = show_progress(args)
+    # Checked first: no data, no demo (and no half-written output folder).
+    files, source = _data(args)
+    out = pathlib.Path(args.out)
+    make_folder(out, "--out")
+    results, written = _simulate(args, out)
+    failure, fit_written, tests = _fit(args, out, files, source, progress)
+    written += fit_written
+    if not args.no_diagnose:
+        written += _diagnose(args, out, tests, progress)
+    print()
+    print(f"Wrote {len(written)} files to {out}{os.sep}: ", end="")
+    print(", ".join(p.name for p in written))
+    failed = [r.case.name for r in results if r.error]
+    if failed:
+        raise CliError(
+            f"{len(failed)} of {len(results)} simulated demo cases failed "
+            f"({', '.join(failed)}); see the summary above.",
+            status=1,
+        )
+    if failure is not None:
+        raise failure
+    return 0

@@ -1,0 +1,137 @@
+"""`jaxcable fit`: a model fitted to measured tests, written as PARAMS.json, with a
+summary on stdout and optionally a report folder."""
+
+import os
+import pathlib
+import warnings
+
+import jax
+import numpy as np
+
+from .._fit import FitResult, IdentifiabilityWarning, fit
+from .._models import AbstractCableModel
+from .._progress import Progress
+from .._report import write_report
+from .common import CliError, make_folder, require_folder_of, show_progress
+from .data import data_options, describe_tests, read_tests
+from .models import names_option, resolve_model
+
+
+def run_fit(
+    model: AbstractCableModel,
+    name: str,
+    tests,
+    *,
+    fit_names: list[str],
+    per_test: list[str],
+    args,
+    progress: bool,
+) -> FitResult:
+    """`jaxcable.fit` with the command line's solver options.
+
+    **Arguments:**
+
+    - `model`: the model and its start values.
+    - `name`: its command-line name, for the errors.
+    - `tests`: the measured tests.
+    - `fit_names`, `per_test`: the parameters to fit, and those fitted per test
+        (empty: the defaults of `jaxcable.fit`).
+    - `args`: the parsed command line (`starts`, `max_steps`, `seed`).
+    - `progress`: whether to draw a progress bar.
+
+    **Returns:**
+
+    The fit, converged or not; identifiability warnings are in its `warnings` (and
+    printed with its summary), not issued.
+    """
+    n = sum(int(np.sum(t.mask)) for t in tests)
+    label = f"fitting {name} to {len(tests)} test(s), {n} samples"
+    with Progress(label, enabled=progress), warnings.catch_warnings():
+        warnings.simplefilter("ignore", IdentifiabilityWarning)
+        try:
+            return fit(
+                model,
+                tests,
+                fit=fit_names or None,
+                per_test=per_test or None,
+                multistart=args.starts,
+                max_steps=args.max_steps,
+                key=jax.random.key(args.seed),
+                throw=False,
+            )
+        except ValueError as e:
+            raise CliError(f"cannot fit model '{name}': {e}") from None
+
+
+def fit_failure(result: FitResult) -> CliError | None:
+    """The error to exit with (status 1) when the fit failed or did not converge."""
+    if not np.isfinite(result.loss):
+        return CliError(
+            f"the fit failed from every start ({result.message}); try other start "
+            "values (--params) or fewer parameters (--fit).",
+            status=1,
+        )
+    if not result.converged:
+        return CliError(
+            f"the fit did not converge ({result.message}); the best start was "
+            "written for inspection. Try more --max-steps, other start values "
+            "(--params) or fewer parameters (--fit).",
+            status=1,
+        )
+    return None
+
+
+def fit_command(args) -> int:
+    """Run `jaxcable fit` with the parsed command line `args`; the exit status."""
+    progress = show_progress(args)
+    name, model = resolve_model(
+        args,
+        per_test_hint="use a plain {name: value} file of start values with --params.",
+    )
+    fit_names = names_option(args.fit, "--fit", model, name)
+    per_test = names_option(args.per_test, "--per-test", model, name)
+    require_folder_of(args.out, "--out")
+    tests = read_tests(args.data, data_options(args), args.every, progress)
+    print(f"read {len(tests)} file(s):")
+    print("\n".join(describe_tests(tests, args.every)))
+    result = run_fit(
+        model,
+        name,
+        tests,
+        fit_names=fit_names,
+        per_test=per_test,
+        args=args,
+        progress=progress,
+    )
+    failure = fit_failure(result)
+    print()
+    print(result.summary())
+    print()
+    # A fit that failed from every start has nothing worth writing; an unconverged
+    # one is written for inspection, then reported.
+    if failure is not None and not np.isfinite(result.loss):
+        raise failure
+    result.to_json(args.out)
+    print(f"wrote {args.out}")
+    if args.report:
+        out = pathlib.Path(args.report)
+        make_folder(out, "--report")
+        notes = [f"files: {', '.join(str(p) for p in args.data)}"]
+        if args.no_slack:
+            notes.append("slack detection off (--no-slack)")
+        if args.every > 1:
+            notes.append(f"1 sample in {args.every} fitted (--every)")
+        written = write_report(
+            out,
+            result,
+            tests,
+            title=f"jaxcable fit: model '{name}'",
+            notes=notes,
+            progress=progress,
+        )
+        print(
+            f"wrote the report to {out}{os.sep}: {', '.join(p.name for p in written)}"
+        )
+    if failure is not None:
+        raise failure
+    return 0

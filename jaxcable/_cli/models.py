@@ -1,0 +1,167 @@
+"""The model of a command: `--model NAME` and `--params PARAMS.json`, and the parameter
+names of `--fit` / `--per-test`.
+
+Model names come from the one registry (`jaxcable._models.BY_CLI_NAME`); a parameter
+file is read with the one JSON reader, whose errors (a `ValueError` naming the file,
+line and column) `main` reports as the command line's one-line error.
+"""
+
+import dataclasses
+import json
+
+import equinox as eqx
+import numpy as np
+
+from .._fit import FitResult
+from .._io import read_json
+from .._models import BY_CLI_NAME, DEFAULT_CLI_MODEL, AbstractCableModel, cli_name
+from .common import CliError
+
+
+def parameter_names(model: AbstractCableModel) -> list[str]:
+    """The model's fittable parameters: its inexact-array fields."""
+    return [
+        f.name
+        for f in dataclasses.fields(model)
+        if eqx.is_inexact_array(getattr(model, f.name))
+    ]
+
+
+def names_option(
+    value: str | None, option: str, model: AbstractCableModel, name: str
+) -> list[str]:
+    """Parse a comma-separated `--fit` / `--per-test` list of parameter names.
+
+    **Arguments:**
+
+    - `value`: the option's value, or None when it was not given.
+    - `option`: the option, for the errors.
+    - `model`: the model whose parameters the names must be.
+    - `name`: the model's command-line name, for the errors.
+
+    **Returns:**
+
+    The names, in the order given (empty when `value` is None).
+    """
+    if value is None:
+        return []
+    names = [n.strip() for n in value.split(",")]
+    available = parameter_names(model)
+    for n in names:
+        if not n:
+            raise CliError(f"{option} {value!r}: an empty name.")
+        if n not in available:
+            raise CliError(
+                f"{option}: '{n}' is not a parameter of model '{name}' (its "
+                f"parameters: {', '.join(available)})."
+            )
+    if len(set(names)) != len(names):
+        raise CliError(f"{option} {value!r}: a name is repeated.")
+    return names
+
+
+def _check_plain_params(path: str, params, cls: type, name: str) -> dict:
+    """Validate a plain {parameter name: value (SI)} object for model `name`."""
+    if not isinstance(params, dict):
+        raise CliError(
+            f"{path}: expected a JSON object of parameter name -> value (SI units), "
+            f"got {type(params).__name__}."
+        )
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    for key, value in params.items():
+        if key not in fields:
+            raise CliError(
+                f"{path}, parameter '{key}': not a parameter of model '{name}' "
+                f"(its parameters: {', '.join(fields)})."
+            )
+        # Static fields (settings, not parameters) may also be strings or booleans.
+        static = fields[key].metadata.get("static", False)
+        number = isinstance(value, int | float) and not isinstance(value, bool)
+        if not number and not (static and isinstance(value, str | bool | int | float)):
+            raise CliError(
+                f"{path}, parameter '{key}': {json.dumps(value)} is not a number "
+                "(SI units)."
+            )
+    return params
+
+
+def _build_model(name: str, params: dict, params_path: str | None):
+    """Model `name` built from `params` (its defaults for the others)."""
+    where = params_path or "default parameters"
+    try:
+        return BY_CLI_NAME[name].cls(**params)
+    except (TypeError, ValueError) as e:
+        raise CliError(f"{where}: cannot build model '{name}': {e}") from None
+
+
+def _select_test(path: str, result: FitResult, test: str | None, purpose: str):
+    """The model of one test of a fit with per-test parameters (`--test`)."""
+    if not result.per_test:
+        return result.model
+    ids = list(result.test_ids)
+    if test is None:
+        raise CliError(
+            f"{path}: parameters {', '.join(result.per_test)} were fitted per test "
+            f"({', '.join(ids)}); {purpose}"
+        )
+    if test in ids:
+        return result.models[ids.index(test)]
+    if test.isdigit() and int(test) < len(ids):
+        return result.models[int(test)]
+    raise CliError(
+        f"--test {test}: not a test of {path} (its tests: "
+        f"{', '.join(f'{i} {t}' for i, t in enumerate(ids))})."
+    )
+
+
+def resolve_model(args, *, per_test_hint: str) -> tuple[str, AbstractCableModel]:
+    """The model of a command, from `--model` and `--params`.
+
+    `--params` is either a plain {name: value} object of SI values replacing the
+    model's defaults, or a PARAMS.json written by `jaxcable fit`
+    (`FitResult.to_json`), whose model it names; `--model`, when given, must agree.
+
+    **Arguments:**
+
+    - `args`: the parsed command line (`model`, `params`, and `test` if the command
+        has it).
+    - `per_test_hint`: what to do instead, said when the PARAMS.json holds per-test
+        parameters and no test is chosen.
+
+    **Returns:**
+
+    (the model's command-line name, the model).
+    """
+    requested = args.model
+    if not args.params:
+        name = requested or DEFAULT_CLI_MODEL
+        return name, _build_model(name, {}, None)
+    path = args.params
+    doc = read_json(path, "parameters")
+    if isinstance(doc, dict) and doc.get("format") == "jaxcable-params":
+        result = FitResult.from_json(path)  # ValueError -> exit 2, naming the file
+        name = cli_name(result.model)
+        if name is None:
+            raise CliError(
+                f"{path}: model {type(result.model).__name__} has no command-line "
+                f"name (known: {', '.join(BY_CLI_NAME)})."
+            )
+        if requested is not None and requested != name:
+            raise CliError(
+                f"{path}: holds a fit of model '{name}', not '{requested}' "
+                f"(--model); drop --model or pass --model {name}."
+            )
+        model = _select_test(path, result, getattr(args, "test", None), per_test_hint)
+        return name, model
+    name = requested or DEFAULT_CLI_MODEL
+    params = _check_plain_params(path, doc, BY_CLI_NAME[name].cls, name)
+    return name, _build_model(name, params, path)
+
+
+def params_metadata(model: AbstractCableModel) -> str:
+    """The model's parameters as compact JSON (SI), for an output file's metadata."""
+    values = {}
+    for name in parameter_names(model):
+        v = np.asarray(getattr(model, name), float)
+        values[name] = float(v) if v.ndim == 0 else v.tolist()
+    return json.dumps(values, separators=(",", ":"))

@@ -1,0 +1,388 @@
+"""The argparse tree of the `jaxcable` command line: its commands, their options, and
+the validators of numeric options."""
+
+import argparse
+import importlib.metadata
+import math
+from collections.abc import Callable
+
+from .._models import BY_CLI_NAME, DEFAULT_CLI_MODEL, PARK_IDENTIFIABLE
+from .common import PROG, CliError
+from .demo import demo_command
+from .diagnose import diagnose_command
+from .fit import fit_command
+from .simulate import simulate_command
+
+
+class _Parser(argparse.ArgumentParser):
+    # argparse prints the usage and an error on two lines; we promise one line.
+    def error(self, message):
+        raise CliError(f"{message} (see '{self.prog} --help')")
+
+
+def _version() -> str:
+    try:
+        return importlib.metadata.version("jaxcable")
+    except importlib.metadata.PackageNotFoundError:  # pragma: no cover
+        return "unknown"
+
+
+def _number(
+    convert: type, noun: str, valid: Callable[[float], bool], requirement: str
+) -> Callable[[str], int | float]:
+    """An argparse `type`: `convert(text)`, refused unless `valid(value)`.
+
+    **Arguments:**
+
+    - `convert`: `int` or `float`.
+    - `noun`: what `convert` parses, for the error ("an integer").
+    - `valid`: whether a parsed value is acceptable.
+    - `requirement`: what an acceptable value is, for the error ("must be at least 1").
+    """
+
+    def parse(text: str):
+        try:
+            value = convert(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not {noun}") from None
+        if not valid(value):
+            raise argparse.ArgumentTypeError(f"{text} {requirement}")
+        return value
+
+    return parse
+
+
+_positive_int = _number(int, "an integer", lambda v: v >= 1, "must be at least 1")
+_non_negative_int = _number(int, "an integer", lambda v: v >= 0, "must be at least 0")
+_positive_float = _number(
+    float,
+    "a number",
+    lambda v: math.isfinite(v) and v > 0,
+    "must be a positive number",
+)
+
+
+def _add_model_options(parser, params_help: str) -> None:
+    parser.add_argument(
+        "--model",
+        choices=list(BY_CLI_NAME),
+        default=None,
+        help=f"the cable model (default: the model of a --params file written by "
+        f"'jaxcable fit', else {DEFAULT_CLI_MODEL}, Park et al.)",
+    )
+    parser.add_argument("--params", metavar="PARAMS.json", help=params_help)
+
+
+def _add_data_options(parser) -> None:
+    """The options that say how to read the data files (`fit`, `diagnose`)."""
+    raw = parser.add_argument_group("reading raw exports")
+    raw.add_argument(
+        "--columns",
+        metavar="NAMES",
+        help="the files' columns in order with their units, e.g. "
+        "time_s,elongation_mm,force_N (also time_ms, time_min, time_h, force_kN, "
+        "elongation_m, temperature_C; '-' for a column to ignore); default: from "
+        "the header",
+    )
+    raw.add_argument(
+        "--skip-rows",
+        type=_non_negative_int,
+        metavar="N",
+        help="lines before the first data row (default: detected)",
+    )
+    raw.add_argument(
+        "--length-mm",
+        type=_positive_float,
+        metavar="X",
+        help="free length of the cable, mm (replaces the files' length_mm)",
+    )
+    raw.add_argument(
+        "--diameter-mm",
+        type=_positive_float,
+        metavar="X",
+        help="diameter, mm (replaces the files' diameter_mm; default 3)",
+    )
+    raw.add_argument(
+        "--rate-mm-per-min",
+        type=_positive_float,
+        metavar="X",
+        help="crosshead speed, mm/min (replaces the files' rate_mm_per_min; default 3)",
+    )
+    raw.add_argument(
+        "--no-slack",
+        action="store_true",
+        help="do not detect slack stretches (by default, stretches where the force "
+        "is about zero while the elongation moves at the crosshead's speed are "
+        "masked and not fitted; a fast recovery at zero force can look like one)",
+    )
+
+
+def _add_solver_options(parser, starts: int) -> None:
+    parser.add_argument(
+        "--starts",
+        type=_positive_int,
+        default=starts,
+        metavar="N",
+        help=f"number of starts of the multi-start fit (default: {starts})",
+    )
+    parser.add_argument(
+        "--seed",
+        type=int,
+        default=0,
+        metavar="N",
+        help="seed of the random start perturbations (default: 0)",
+    )
+    parser.add_argument(
+        "--max-steps",
+        type=_positive_int,
+        default=256,
+        metavar="N",
+        help="Levenberg-Marquardt steps per start (default: 256)",
+    )
+    parser.add_argument(
+        "--every",
+        type=_positive_int,
+        default=1,
+        metavar="K",
+        help="fit every K-th sample only, to thin dense exports (default: 1, all)",
+    )
+    parser.add_argument(
+        "--quiet",
+        action="store_true",
+        help="no progress bar (it is shown only when stderr is a terminal)",
+    )
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The parser of the `jaxcable` command line; each command sets `run`, the
+    function that runs it with the parsed arguments and returns the exit status."""
+    parser = _Parser(
+        prog=PROG,
+        description="Differentiable creep models of polymer (Dyneema) cables.",
+    )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
+    commands = parser.add_subparsers(
+        dest="command", metavar="COMMAND", required=True, parser_class=_Parser
+    )
+
+    sim = commands.add_parser(
+        "simulate",
+        help="simulate a rate-driven protocol (JSON) or a force history (CSV)",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        description=(
+            "Simulate a cable model and write the result in the canonical CSV "
+            "format\n(time_s,force_N,elongation_mm with '# key: value' metadata).\n\n"
+            "PROTOCOL.json: a rate-driven test as a tensile tester runs it; the time "
+            "of each\nforce sample is solved by the model. Example:\n"
+            '  {"length_mm": 300, "diameter_mm": 3, "rate_mm_per_min": 3,\n'
+            '   "segments": [{"cycles": 10, "force_max_N": 100, "samples_per_ramp": '
+            "200},\n"
+            '                {"rest_h": 24},\n'
+            '                {"ramp_to_N": 50, "samples": 100},\n'
+            '                {"hold_s": 60, "force_N": 50}]}\n'
+            "Segments: cycles (force_max_N, force_min_N=0, samples_per_ramp=200, "
+            "peak_hold_s=0),\nramp_to_N (samples=100), hold_s (force_N = the current "
+            "force, samples=10),\nrest_h or rest_s (at 0 N, samples=24). diameter_mm "
+            "and rate_mm_per_min default to 3;\nid, material and description are "
+            "copied to the output.\n\n"
+            "HISTORY.csv: a time-stamped force history in the canonical CSV format "
+            "('# length_mm: ...'\nmetadata, then time_s,force_N[,...]); the same file "
+            "is written with elongation_mm filled\nin (other columns and metadata "
+            "kept). The cable is taken from the metadata:\nlength_mm (required), "
+            "diameter_mm (default 3) and rate_mm_per_min (default 3)."
+        ),
+    )
+    sim.add_argument(
+        "input",
+        metavar="PROTOCOL.json|HISTORY.csv",
+        help="a protocol (.json) or a force history (.csv)",
+    )
+    _add_model_options(
+        sim,
+        "model parameters: a PARAMS.json written by 'jaxcable fit', or a JSON object "
+        "of parameter name -> value (SI units) replacing the model's defaults "
+        "(default: the model's documented defaults, Dyneema SK78 3 mm for "
+        "integrated)",
+    )
+    sim.add_argument(
+        "--test",
+        metavar="ID",
+        help="with a PARAMS.json fitted with per-test parameters: the test (id or "
+        "index) whose values to use",
+    )
+    sim.add_argument(
+        "--out", metavar="OUT.csv", required=True, help="the file to write"
+    )
+    sim.set_defaults(run=simulate_command)
+
+    fit = commands.add_parser(
+        "fit",
+        help="fit a model to measured tests",
+        description=(
+            "Fit a cable model to one or many measured tests at once by least squares "
+            "on elongation (Levenberg-Marquardt, multi-start; see jaxcable.fit). "
+            "Material parameters are shared by all tests. Files are read with "
+            "jaxcable.read_test: canonical CSV files or raw tensile-tester exports "
+            "(other separators and encodings, preamble and unit rows, quoted "
+            "numbers); slack stretches are detected, masked and not fitted. Writes "
+            "the fitted parameters as PARAMS.json (use it with 'jaxcable simulate "
+            "--params') and prints the RMSE of every test (mm and % of its peak "
+            "elongation), the parameters with standard errors and correlations, and "
+            "warnings naming parameters the data cannot identify."
+        ),
+    )
+    fit.add_argument("data", nargs="+", metavar="DATA.csv", help="the measured tests")
+    _add_model_options(
+        fit,
+        "start values: a PARAMS.json written by 'jaxcable fit', or a JSON object of "
+        "parameter name -> value (SI units) replacing the model's defaults; fixed "
+        "parameters keep these values",
+    )
+    fit.add_argument(
+        "--out", metavar="PARAMS.json", required=True, help="the file to write"
+    )
+    fit.add_argument(
+        "--report",
+        metavar="DIR",
+        help="write plots (fit_loops.png: measured vs model force-elongation, one "
+        "panel per test; fit_residuals.png: residuals vs time) and tables "
+        "(summary.md, rmse.csv) to this folder",
+    )
+    _add_data_options(fit)
+    what = fit.add_argument_group("what to fit")
+    what.add_argument(
+        "--fit",
+        metavar="NAMES",
+        help="comma-separated parameters to fit (default: all); the others keep "
+        "their start values",
+    )
+    what.add_argument(
+        "--per-test",
+        metavar="NAMES",
+        help="comma-separated parameters fitted with one value per test",
+    )
+    _add_solver_options(fit, starts=4)
+    fit.set_defaults(run=fit_command)
+
+    diag = commands.add_parser(
+        "diagnose",
+        help="find what the model gets wrong and name the physical cause",
+        description=(
+            "Fit the base model (default: the integrated model) to the measured "
+            "tests with the last part of every test held out, analyse its residuals "
+            "for structure (time under load, force, loading vs unloading, cycle, "
+            "rest time, length, rate, temperature, autocorrelation), fit every "
+            "candidate extension (hereditary, second_retardation, "
+            "stress_nonlinear_creep, temperature, termination_compliance, "
+            "bedding_in, sensor_drift), score each on the held-out data and by BIC, "
+            "and name the cause: the significant candidate of largest held-out gain, "
+            "or none. Reads files like 'jaxcable fit'. See jaxcable.diagnose."
+        ),
+    )
+    diag.add_argument("data", nargs="+", metavar="DATA.csv", help="the measured tests")
+    _add_model_options(
+        diag,
+        "start values of the base model: a PARAMS.json written by 'jaxcable fit', or "
+        "a JSON object of parameter name -> value (SI units)",
+    )
+    diag.add_argument(
+        "--json",
+        action="store_true",
+        help="print one JSON object on stdout (named_cause, candidates, "
+        "base_heldout_rmse_mm, extended_heldout_rmse_mm, ...); the log goes to stderr",
+    )
+    diag.add_argument(
+        "--report",
+        metavar="DIR",
+        help="write diagnosis.json, summary.md and plots before/after "
+        "(residuals.png, candidates.png, structure.png) to this folder",
+    )
+    _add_data_options(diag)
+    how = diag.add_argument_group("how to diagnose")
+    how.add_argument(
+        "--fit",
+        metavar="NAMES",
+        help="comma-separated base parameters to fit (default: for the integrated "
+        f"model {','.join(PARK_IDENTIFIABLE)}; else all)",
+    )
+    how.add_argument(
+        "--candidates",
+        metavar="IDS",
+        help="comma-separated extension ids to try (default: all seven)",
+    )
+    how.add_argument(
+        "--split",
+        choices=("time", "tests"),
+        default="time",
+        help="held-out data: 'time', the last --holdout of every test (default); "
+        "'tests', cross-validation over whole tests (--folds; one fit per fold "
+        "and candidate)",
+    )
+    how.add_argument(
+        "--folds",
+        type=_positive_int,
+        default=None,
+        metavar="K",
+        help="folds of --split tests (default: leave-one-test-out)",
+    )
+    how.add_argument(
+        "--holdout",
+        type=_positive_float,
+        default=0.3,
+        metavar="X",
+        help="held-out fraction of every test's samples for --split time "
+        "(default: 0.3)",
+    )
+    _add_solver_options(diag, starts=1)
+    diag.set_defaults(run=diagnose_command)
+
+    demo = commands.add_parser(
+        "demo",
+        help="simulate Park et al.'s tests and fit the bundled data set",
+        description=(
+            "1. Simulate Park et al.'s test protocol with the default IntegratedModel "
+            "(Dyneema SK78, 3 mm, 300 mm long): one 0-100 N cycle at 3 and 50 mm/min "
+            "(rate effect) and 10 cycles to 100 and 150 N at 3 mm/min; write PNG "
+            "plots (rate_effect.png, cycles10.png) and the simulated histories as "
+            "canonical CSV files. 2. Fit the IntegratedModel to the bundled data set "
+            "(jaxcable/data/*.csv, synthetic: Park's protocol at two lengths, two "
+            f"rates and two force levels). By default {len(PARK_IDENTIFIABLE)} of its 12 "
+            f"parameters are fitted ({', '.join(PARK_IDENTIFIABLE)}), the others kept at "
+            "their defaults, so that the demo takes about a minute; write the fit "
+            "report (params.json, fit_loops.png, fit_residuals.png, summary.md, "
+            "rmse.csv). Prints the headline numbers."
+        ),
+    )
+    demo.add_argument(
+        "--out",
+        metavar="DIR",
+        default="demo_out",
+        help="output folder (default: demo_out)",
+    )
+    demo.add_argument(
+        "--samples-per-ramp",
+        type=int,
+        default=1000,
+        metavar="N",
+        help="force samples per loading or unloading ramp of the simulated tests "
+        "(default: 1000, Park's 2000 per cycle)",
+    )
+    demo.add_argument(
+        "--data",
+        metavar="DIR",
+        help="fit the canonical CSV files in this folder instead of the bundled "
+        "data set",
+    )
+    demo.add_argument(
+        "--fit",
+        metavar="NAMES",
+        help=f"comma-separated parameters to fit (default: {','.join(PARK_IDENTIFIABLE)})",
+    )
+    demo.add_argument(
+        "--no-diagnose",
+        action="store_true",
+        help="skip step 3, the diagnosis of the fitted data (about a minute)",
+    )
+    _add_solver_options(demo, starts=2)
+    demo.set_defaults(run=demo_command)
+    return parser

@@ -1,0 +1,115 @@
+"""`jaxcable simulate`: a rate-driven protocol (JSON) or a force history (CSV) simulated
+by a model, written as a canonical CSV file."""
+
+import dataclasses
+import pathlib
+from collections.abc import Callable
+
+import numpy as np
+
+from .._cable import Cable
+from .._drive import simulate_force_history, simulate_rate_test
+from .._io import TestData, read_csv, read_protocol, write_csv
+from .._results import RESULTS
+from .common import CliError
+from .models import params_metadata, resolve_model
+
+
+_PER_TEST = "choose the test to simulate with --test ID (or its index)."
+
+
+def _check_force(data: TestData, cable: Cable) -> None:
+    # The simulation checks these too, but only knows sample indices, not file lines.
+    force = data.force
+    limit = float(cable.breaking_load)
+    negative = np.flatnonzero(force < 0)
+    if negative.size:
+        i = int(negative[0])
+        raise CliError(
+            f"{data.locate(i, 'force_N')}: force {force[i]:g} N is negative (a cable "
+            "cannot push)."
+        )
+    above = np.flatnonzero(force > limit)
+    if above.size:
+        i = int(above[0])
+        raise CliError(
+            f"{data.locate(i, 'force_N')}: force {force[i]:g} N exceeds the cable's "
+            f"breaking load ({limit:g} N)."
+        )
+
+
+def _check_success(traj, name: str, where: Callable[[int | None], str]) -> None:
+    """Fail with status 1 unless the simulation succeeded; `where(i)` says where the
+    first non-finite sample `i` (None if there is none) is in the input."""
+    if traj.result == RESULTS.successful:
+        return
+    bad = np.flatnonzero(~np.isfinite(np.asarray(traj.strain)))
+    i = int(bad[0]) if bad.size else None
+    raise CliError(
+        f"{where(i)}: model '{name}' failed: {RESULTS[traj.result]}", status=1
+    )
+
+
+def _simulate_history(args) -> int:
+    data = read_csv(args.input)
+    cable = data.cable()
+    _check_force(data, cable)
+    name, model = resolve_model(args, per_test_hint=_PER_TEST)
+    # The forces as read, as `fit` drives its model: a PARAMS.json re-simulates the
+    # file it was fitted to exactly as the fit saw it.
+    traj = simulate_force_history(model, cable, data.time, data.force, throw=False)
+    _check_success(
+        traj, name, lambda i: str(args.input) if i is None else data.locate(i)
+    )
+    metadata = dict(data.metadata)
+    # Record the cable the simulation assumed where the file left it to defaults.
+    metadata.setdefault("diameter_mm", float(cable.diameter) * 1e3)
+    metadata.setdefault("rate_mm_per_min", float(cable.speed) * 1e3 * 60)
+    metadata["model"] = name
+    if args.params:
+        metadata["model_params"] = params_metadata(model)
+    out = dataclasses.replace(
+        data, elongation=np.asarray(traj.elongation), metadata=metadata
+    )
+    write_csv(args.out, out)
+    print(f"wrote {args.out} ({data.num_samples} samples, model '{name}')")
+    return 0
+
+
+def _simulate_protocol(args) -> int:
+    spec = read_protocol(args.input)
+    name, model = resolve_model(args, per_test_hint=_PER_TEST)
+    traj = simulate_rate_test(model, spec.cable, spec.protocol, throw=False)
+
+    def where(i):
+        segment = spec.segment_of(i) if i is not None else None
+        return args.input if segment is None else f"{args.input}, segments[{segment}]"
+
+    _check_success(traj, name, where)
+    metadata = {
+        **spec.metadata,
+        "protocol": pathlib.Path(args.input).name,
+        "model": name,
+    }
+    if args.params:
+        metadata["model_params"] = params_metadata(model)
+    data = TestData(
+        time=np.asarray(traj.time),
+        force=np.asarray(traj.force),
+        elongation=np.asarray(traj.elongation),
+        metadata=metadata,
+    )
+    write_csv(args.out, data)
+    duration = float(data.time[-1])
+    print(
+        f"wrote {args.out} ({data.num_samples} samples over {duration:.6g} s, "
+        f"model '{name}')"
+    )
+    return 0
+
+
+def simulate_command(args) -> int:
+    """Run `jaxcable simulate` with the parsed command line `args`; the exit status."""
+    if args.input.lower().endswith(".json"):
+        return _simulate_protocol(args)
+    return _simulate_history(args)
