@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import jaxcable as jc
-from jaxcable import _simulate
+from jaxcable._drive import simulate as _simulate
 
 from .helpers import finite_difference_grad, leaf_names, tree_allclose
 

@@ -1,9 +1,10 @@
-from .fit import (
-    FitResult as FitResult,
-    IdentifiabilityWarning as IdentifiabilityWarning,
+from .data import (
+    PaddedTests as PaddedTests,
     as_test_list as as_test_list,
-    fit as fit,
     pad_tests as pad_tests,
-    residuals as residuals,
     test_id as test_id,
 )
+from .fit import fit as fit
+from .problem import make_loss as make_loss, residuals as residuals
+from .result import FitResult as FitResult
+from .statistics import IdentifiabilityWarning as IdentifiabilityWarning

@@ -1,0 +1,384 @@
+"""The fit's least-squares problem: the residuals of a model on padded tests, as a
+function of the model's parameters and of the unconstrained vector u.
+"""
+
+import dataclasses
+from collections.abc import Callable, Mapping, Sequence
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Bool, Float, PyTree
+
+from .._cable import Cable
+from .._drive import CableState, init_state, step
+from .._models import AbstractCableModel, ParameterInfo
+from .._results import RESULTS
+from .data import PaddedTests, as_test_list, pad_tests, test_id
+from .parameters import (
+    Layout,
+    bound_of,
+    declared_parameters,
+    field_at,
+    to_natural,
+    to_unconstrained,
+)
+
+
+_DOMAIN_MESSAGE = (
+    "a modulus, viscosity or time is not positive, or a constraint of the model "
+    "fails for this cable (e.g. Park's t_r2 = lambda1 (L0/v)^2 - lambda2 <= 0)."
+)
+
+
+def _elongation_history(
+    model, cable, time, force, mask, temperature
+) -> tuple[Float[Array, " samples"], RESULTS]:
+    """The elongation (m) of [`jaxcable.simulate_force_history`][] and its status.
+
+    The same scan of [`jaxcable.step`][] (the first sample applied from the unloaded
+    cable at `time[0]`, masked samples leaving the state unchanged), keeping only the
+    elongation: inside the solver's loop, XLA on CPU copies a scan's stacked outputs
+    at every step, and a full `Trajectory` (every state field, times the Jacobian's
+    tangents) made each Jacobian about 20x slower than this. The cable's temperature
+    is the sample's (K), for temperature-dependent models. The forces are used as
+    measured (no deadband), so the fit's model is the one every other entry point
+    simulates.
+    """
+
+    def body(carry: CableState, x):
+        t, f, m, temp = x
+        here = eqx.tree_at(lambda c: c.temperature, cable, temp)
+        new, _ = step(model, here, carry, t, f)
+        new = jax.tree_util.tree_map(lambda a, b: jnp.where(m, a, b), new, carry)
+        return new, new.strain
+
+    final, strain = jax.lax.scan(
+        body, init_state(model, cable, time[0]), (time, force, mask, temperature)
+    )
+    return strain * cable.length, final.result
+
+
+def residuals(
+    params: PyTree,
+    static: PyTree,
+    tests: PaddedTests,
+) -> Float[Array, "tests samples"]:
+    """Model minus measured elongation of every test, m: the fit's residual.
+
+    A pure, jittable function of `params` (differentiate it with `jax.jacfwd`,
+    `jax.grad` of a loss, ...). Each test's model is driven by its time-stamped force
+    history ([`jaxcable.simulate_force_history`][]); the tests run in one `vmap`.
+
+    **Arguments:**
+
+    - `params`, `static`: a model split by `eqx.partition(model, eqx.is_inexact_array)`
+        (natural SI values). A leaf of shape `(tests,)` is a per-test parameter (test
+        i uses entry i); a scalar leaf is shared by all tests.
+    - `tests`: a [`jaxcable.PaddedTests`][] from [`jaxcable.pad_tests`][].
+
+    **Returns:**
+
+    The residuals, m, shape `(tests, samples)`: 0 at padding and masked samples, NaN
+    for every sample of a test whose simulation failed (a parameter outside its
+    domain, a non-finite strain; `Trajectory.result`), so that a least-squares solver
+    rejects such a step.
+    """
+    if not isinstance(tests, PaddedTests):
+        raise ValueError(
+            "`tests` must be a jaxcable.PaddedTests (use jaxcable.pad_tests), got "
+            f"{type(tests).__name__}."
+        )
+    in_axes = jax.tree_util.tree_map(lambda x: 0 if jnp.ndim(x) == 1 else None, params)
+
+    def one(p, cable, time, force, simulate, weight, measured, temperature):
+        model = eqx.combine(p, static)
+        elongation, result = _elongation_history(
+            model, cable, time, force, simulate, temperature
+        )
+        r = jnp.where(weight > 0, elongation - measured, 0.0)
+        return jnp.where(result == RESULTS.successful, r, jnp.nan)
+
+    return jax.vmap(one, in_axes=(in_axes, 0, 0, 0, 0, 0, 0, 0))(
+        params,
+        tests.cable,
+        tests.time,
+        tests.force,
+        tests.simulate,
+        tests.weight,
+        tests.elongation,
+        tests.temperature,
+    )
+
+
+class Problem(eqx.Module):
+    """Everything the fit kernel needs: the layout of u, the fixed values, the data.
+
+    **Fields:**
+
+    - `layout`: which parameters u holds, and how.
+    - `static`: the non-array part of the model.
+    - `base`: the inexact-array fields of the start model (the fixed values).
+    - `scales`: the scale s of each name's `"linear"` transform (1 where unused).
+    - `data`: the padded tests.
+    """
+
+    layout: Layout = eqx.field(static=True)
+    static: PyTree = eqx.field(static=True)
+    base: PyTree
+    scales: Float[Array, " names"]
+    data: PaddedTests
+
+    def natural(self, u: Float[Array, " p"]) -> dict[str, Array]:
+        """{name: natural value} of the fitted parameters."""
+        split = self.layout.split(u)
+        out = {}
+        # Bounded transforms read their bound, so they come after the others.
+        order = sorted(
+            range(len(self.layout.names)),
+            key=lambda i: bound_of(self.layout.transforms[i]) is not None,
+        )
+        for i in order:
+            name, transform = self.layout.names[i], self.layout.transforms[i]
+            other = bound_of(transform)
+            bound = None
+            if other is not None:
+                bound = out[other] if other in out else field_at(self.base, other)
+            out[name] = to_natural(transform, split[name], self.scales[i], bound)
+        return out
+
+    def natural_flat(self, u: Float[Array, " p"]) -> Float[Array, " p"]:
+        """The natural values of u, laid out as u."""
+        return self.layout.join(self.natural(u))
+
+    def params(self, u: Float[Array, " p"]) -> PyTree:
+        """The model's inexact-array fields with the fitted ones set from u."""
+        values = self.natural(u)
+        names = self.layout.names
+        return eqx.tree_at(
+            lambda m: [field_at(m, n) for n in names],
+            self.base,
+            [values[n] for n in names],
+        )
+
+    def residuals(self, u: Float[Array, " p"]) -> Float[Array, "tests samples"]:
+        """[`jaxcable.residuals`][] at u, m."""
+        return residuals(self.params(u), self.static, self.data)
+
+    def ssr(self, u: Float[Array, " p"]) -> Float[Array, ""]:
+        """The sum of squared residuals at u, m^2."""
+        return jnp.sum(self.residuals(u) ** 2)
+
+
+@eqx.filter_jit
+def _check_model(model: AbstractCableModel, cables: Cable) -> Bool[Array, " tests"]:
+    return jax.vmap(lambda c: model.check(c) == RESULTS.successful)(cables)
+
+
+def _checked_model(model, data: PaddedTests, tests) -> dict:
+    """The declared parameters of `model`, after checking that they are scalars (start
+    values) valid for every test."""
+    declared = declared_parameters(model)
+    for name in declared:
+        shape = jnp.shape(field_at(model, name))
+        if shape != ():
+            raise ValueError(
+                f"`model.{name}` has shape {shape}; fit a model with scalar "
+                "parameters (the start values), not a batch."
+            )
+    # The parameter-domain check is cheap; a model that fails it would fail every
+    # simulation of the fit, so it is reported before anything else compiles.
+    for i in np.flatnonzero(~np.asarray(_check_model(model, data.cable))):
+        raise ValueError(
+            f"`model`: its parameters are outside their domain for tests[{i}] "
+            f"({test_id(tests[i], i)}): {_DOMAIN_MESSAGE}"
+        )
+    return declared
+
+
+def _names(model, available: list[str], arg: str, value) -> tuple[str, ...]:
+    """The parameter names given as argument `arg` (None: none), checked."""
+    if value is None:
+        return ()
+    if isinstance(value, str):
+        value = [value]
+    value = tuple(value)
+    unknown = [n for n in value if n not in available]
+    if unknown:
+        raise ValueError(
+            f"`{arg}` names {unknown}, which are not parameters of "
+            f"{type(model).__name__}; its parameters are {available}."
+        )
+    if len(set(value)) != len(value):
+        raise ValueError(f"`{arg}` repeats a name: {list(value)}.")
+    return value
+
+
+def _infos(model, declared: dict, transforms) -> dict[str, ParameterInfo]:
+    """The registry's fit info of every parameter it describes, with `transforms`
+    applied."""
+    available = list(declared)
+    table = {k: v for k, v in declared.items() if v is not None}
+    for name, transform in (transforms or {}).items():
+        if name not in available:
+            raise ValueError(
+                f"`transforms` names {name!r}, not a parameter of "
+                f"{type(model).__name__} ({available})."
+            )
+        if transform not in ("log", "linear"):
+            raise ValueError(
+                f"`transforms[{name!r}]` must be 'log' or 'linear', got {transform!r}."
+            )
+        old = table.get(name, ParameterInfo(transform, ""))
+        table[name] = dataclasses.replace(old, transform=transform)
+    return table
+
+
+def _fitted_info(model, name: str, table: dict, per: tuple[str, ...]) -> ParameterInfo:
+    """How fitted parameter `name` is fitted: the table's info, else log scale for a
+    positive start and linear otherwise; checked against its start value."""
+    value = float(field_at(model, name))
+    info = table.get(name) or ParameterInfo("log" if value > 0 else "linear", "")
+    if info.transform == "log" and not value > 0:
+        raise ValueError(
+            f"`model.{name}` = {value} is fitted on a log scale and must start "
+            "positive; give it a positive start value, fix it, or pass "
+            f"transforms={{{name!r}: 'linear'}}."
+        )
+    other = bound_of(info.transform)
+    if other is not None and other in per and name not in per:
+        raise ValueError(
+            f"`per_test` names {other!r} but not {name!r}, which is bounded by "
+            f"it; fit both per test or neither."
+        )
+    return info
+
+
+def _start(model, layout: Layout) -> tuple[np.ndarray, np.ndarray]:
+    """The scales of the `"linear"` transforms and the unconstrained start u."""
+    scales = np.ones(len(layout.names))
+    start = []
+    for i, (name, transform, size) in enumerate(
+        zip(layout.names, layout.transforms, layout.sizes)
+    ):
+        value = float(field_at(model, name))
+        scales[i] = abs(value) if value != 0 else 1.0
+        other = bound_of(transform)
+        bound = None if other is None else float(field_at(model, other))
+        start += [to_unconstrained(transform, value, scales[i], bound)] * size
+    return scales, np.array(start)
+
+
+def make_problem(
+    model: AbstractCableModel,
+    tests: list,
+    fit: Sequence[str] | None,
+    per_test: Sequence[str] | None,
+    transforms: Mapping[str, str] | None,
+) -> tuple[Problem, Float[Array, " p"]]:
+    """The least-squares problem of [`jaxcable.fit`][] and [`jaxcable.make_loss`][].
+
+    **Arguments:**
+
+    - `model`, `fit`, `per_test`, `transforms`: as in [`jaxcable.fit`][].
+    - `tests`: a list of tests (see `as_test_list`).
+
+    **Returns:**
+
+    `(problem, u_start)`: the `Problem` and the unconstrained start values.
+
+    **Raises:**
+
+    `ValueError` naming the argument that is not valid.
+    """
+    if not isinstance(model, AbstractCableModel):
+        raise ValueError(
+            "`model` must be a jaxcable model (an AbstractCableModel instance such as "
+            f"jaxcable.IntegratedModel()), got {type(model).__name__}."
+        )
+    data = pad_tests(tests)
+    declared = _checked_model(model, data, tests)
+    available = list(declared)
+    per = _names(model, available, "per_test", per_test)
+    chosen = _names(model, available, "fit", fit) if fit is not None else available
+    if fit is not None and not chosen and not per:
+        raise ValueError("`fit` is empty: name at least one parameter to fit.")
+    names = tuple(n for n in available if n in chosen or n in per)
+    table = _infos(model, declared, transforms)
+    infos = [_fitted_info(model, name, table, per) for name in names]
+    layout = Layout(
+        names=names,
+        per_test=tuple(n in per for n in names),
+        transforms=tuple(i.transform for i in infos),
+        stiffness=tuple(i.stiffness for i in infos),
+        units=tuple(i.unit for i in infos),
+        num_tests=data.num_tests,
+    )
+    scales, start = _start(model, layout)
+    dtype = jnp.result_type(float)
+    base, static = eqx.partition(model, eqx.is_inexact_array)
+    problem = Problem(
+        layout=layout,
+        static=static,
+        base=base,
+        scales=jnp.asarray(scales, dtype),
+        data=data,
+    )
+    return problem, jnp.asarray(start, dtype)
+
+
+def make_loss(
+    model: AbstractCableModel,
+    tests,
+    *,
+    fit: Sequence[str] | None = None,
+    per_test: Sequence[str] | None = None,
+    transforms: Mapping[str, str] | None = None,
+) -> tuple[
+    Callable[[dict[str, Array]], Float[Array, ""]],
+    dict[str, Array],
+    Callable[[dict[str, Array]], AbstractCableModel],
+]:
+    """The fit's loss as a pure function of unconstrained parameters, for your own
+    optimiser (optax, ...).
+
+    The same problem as [`jaxcable.fit`][] solves: the sum of squared residuals
+    (model minus measured elongation, m^2, masked samples excluded) over all tests,
+    as a function of a dict of unconstrained parameters (log of the positive ones;
+    see [`jaxcable.fit`][] for each model's reparameterisation).
+
+    ```python
+    loss, params, to_model = jc.make_loss(jc.BurgersModel(), tests)  # log-parameters
+    opt = optax.adam(1e-2); state = opt.init(params)
+    step = jax.jit(lambda p, s: opt.update(jax.grad(loss)(p), s))
+    for _ in range(2000):
+        updates, state = step(params, state); params = optax.apply_updates(params, updates)
+    fitted = to_model(params)
+    ```
+
+    ([`jaxcable.fit`][]'s Levenberg-Marquardt on the same problem typically needs
+    10-20 steps, and reports standard errors.)
+
+    **Arguments:**
+
+    - `model`, `tests`, `fit`, `per_test`, `transforms`: as in [`jaxcable.fit`][].
+
+    **Returns:**
+
+    `(loss, params, to_model)`: `loss(params)`, the sum of squared residuals, m^2
+    (jittable, differentiable; NaN where a simulation fails); `params`, the start, a
+    dict {name: unconstrained value}, a scalar for shared and a `(tests,)` array for
+    per-test parameters; `to_model(params)`, the model with those values (per-test
+    fields as `(tests,)` arrays).
+    """
+    problem, u0 = make_problem(model, as_test_list(tests), fit, per_test, transforms)
+    layout = problem.layout
+
+    def loss(params: dict[str, Array]) -> Float[Array, ""]:
+        return problem.ssr(layout.join(params))
+
+    def to_model(params: dict[str, Array]) -> AbstractCableModel:
+        return eqx.combine(problem.params(layout.join(params)), problem.static)
+
+    return loss, layout.split(u0), to_model

@@ -1,0 +1,288 @@
+"""The outcome of a fit, `FitResult`: its text summary and its PARAMS.json form."""
+
+import dataclasses
+import importlib.metadata
+import json
+import math
+import os
+import pathlib
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from .._io import parse_json, read_json
+from .._models import AbstractCableModel
+from .parameters import test_slice
+from .serialize import model_document, model_from_document, unknown_model
+
+
+def _json_number(x: float) -> float | None:
+    """`x` for JSON: null where not finite."""
+    return float(x) if math.isfinite(x) else None
+
+
+def _from_json_number(x) -> float:
+    """The inverse of `_json_number`: NaN for null."""
+    return math.nan if x is None else float(x)
+
+
+def _json_matrix(matrix: np.ndarray) -> list[list[float | None]]:
+    return [[_json_number(float(c)) for c in row] for row in matrix]
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class FitResult:
+    """The outcome of [`jaxcable.fit`][]: fitted model(s), errors and uncertainty.
+
+    **Fields:**
+
+    - `model`: the fitted model. Shared parameters hold their fitted value; a
+        per-test parameter holds a `(tests,)` array (a batch for `jax.vmap`).
+    - `models`: one model per test, each with its own per-test values.
+    - `names`: labels of the fitted parameters; a per-test parameter `p` appears as
+        `p[0]`, `p[1]`, ... (test order).
+    - `units`: unit of each fitted parameter (SI; `-` dimensionless).
+    - `values`: fitted values, SI.
+    - `stderr`: standard errors, SI: sqrt of the diagonal of `covariance` (inf for
+        a parameter the residuals do not depend on; huge, not inf, for one in a
+        direction the data do not determine, whose eigenvalue of J^T J is raised to
+        1e-13 of the largest).
+    - `covariance`: sigma^2 (J^T J)^-1 in the unconstrained parameters u, with
+        sigma^2 = SSR / (n - p) (n fitted samples, p parameters) and J the Jacobian
+        of the residuals (m) at the optimum, carried to the natural parameters by the
+        delta method, G C G^T with G = dx/du.
+    - `correlation`: `covariance` normalised by `stderr`.
+    - `singular_values`: of J (in u), largest first.
+    - `loss`: sum of squared residuals at the optimum, SSR, m^2.
+    - `rmse_mm`: RMS residual of each test over its fitted samples, mm.
+    - `rmse_percent`: `rmse_mm` as a percentage of the test's largest |measured
+        elongation| (Park et al. report errors as RMSE in mm and as this percentage
+        of the peak elongation).
+    - `test_ids`: each test's `metadata['id']`, file name or `test i`.
+    - `num_samples`: fitted (unmasked) samples per test.
+    - `warnings`: the identifiability warnings (also issued with `warnings.warn`).
+    - `converged`: whether the chosen start's solver run succeeded.
+    - `message`: the solver's message when it did not ("" otherwise).
+    - `num_steps`: solver steps of the chosen start.
+    - `start_losses`: SSR reached from each start (m^2; inf where it failed).
+    - `per_test`: the names fitted per test.
+    """
+
+    model: AbstractCableModel
+    models: tuple[AbstractCableModel, ...]
+    names: tuple[str, ...]
+    units: tuple[str, ...]
+    values: np.ndarray
+    stderr: np.ndarray
+    covariance: np.ndarray
+    correlation: np.ndarray
+    singular_values: np.ndarray
+    loss: float
+    rmse_mm: np.ndarray
+    rmse_percent: np.ndarray
+    test_ids: tuple[str, ...]
+    num_samples: np.ndarray
+    warnings: tuple[str, ...]
+    converged: bool
+    message: str
+    num_steps: int
+    start_losses: np.ndarray
+    per_test: tuple[str, ...] = ()
+
+    @property
+    def params(self) -> dict[str, float]:
+        """{label: fitted value, SI}."""
+        return {n: float(v) for n, v in zip(self.names, self.values)}
+
+    @property
+    def relative_error(self) -> np.ndarray:
+        """stderr / |value| of each fitted parameter (inf for a zero value)."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(self.values != 0, self.stderr / np.abs(self.values), np.inf)
+
+    def _per_test_rows(self):
+        return zip(self.test_ids, self.num_samples, self.rmse_mm, self.rmse_percent)
+
+    def summary(self) -> str:
+        """A text report: the fit, the per-test errors, the parameter table with
+        standard errors, the correlation matrix and the warnings.
+
+        **Returns:**
+
+        The report as a multi-line string.
+        """
+        n = int(np.sum(self.num_samples))
+        outcome = (
+            f"converged in {self.num_steps} steps"
+            if self.converged
+            else f"NOT converged ({self.message})"
+        )
+        lines = [
+            f"jaxcable fit: {type(self.model).__name__}, {len(self.test_ids)} test(s), "
+            f"{n} samples, {len(self.names)} parameters",
+            f"SSR {self.loss:.6g} m^2; {outcome}; "
+            f"best of {len(self.start_losses)} start(s)",
+            "",
+            f"{'test':<24} {'samples':>8} {'RMSE mm':>10} {'RMSE %':>8}",
+        ]
+        for tid, k, mm, pct in self._per_test_rows():
+            lines.append(f"{tid[:24]:<24} {int(k):>8} {mm:>10.4f} {pct:>8.2f}")
+        lines += [
+            "",
+            f"{'parameter':<12} {'value':>12} {'std err':>10} {'rel %':>8}  unit",
+        ]
+        for name, v, s, r, u in zip(
+            self.names, self.values, self.stderr, self.relative_error, self.units
+        ):
+            lines.append(f"{name:<12} {v:>12.5g} {s:>10.3g} {100 * r:>8.3g}  {u}")
+        if len(self.names) > 1:
+            lines += ["", "correlation:"]
+            width = max(7, max(len(x) for x in self.names) + 1)
+            lines.append(" " * width + "".join(f"{x[:7]:>8}" for x in self.names))
+            for name, row in zip(self.names, self.correlation):
+                lines.append(f"{name:<{width}}" + "".join(f"{c:>8.3f}" for c in row))
+        if self.warnings:
+            lines += ["", "warnings:"] + [f"  - {w}" for w in self.warnings]
+        return "\n".join(lines)
+
+    def to_json(self, path: str | os.PathLike | None = None) -> str:
+        """The fit as PARAMS.json: every model parameter by name (SI) plus metadata.
+
+        `parameters` holds every array field of the model (fitted and fixed), a list
+        per test for per-test parameters; `static` the model's non-array settings;
+        `fitted`, `stderr` and `correlation` the fitted parameters' statistics; `tests`
+        each test's id, samples and RMSE. Non-finite numbers are written as null.
+
+        **Arguments:**
+
+        - `path`: optional file to write.
+
+        **Returns:**
+
+        The JSON text.
+        """
+        fitted = zip(self.names, self.values, self.stderr, self.units)
+        document = {
+            "format": "jaxcable-params",
+            "format_version": 1,
+            "jaxcable_version": importlib.metadata.version("jaxcable"),
+            **model_document(self.model),
+            "units": "SI (N, m, s, Pa, Pa s)",
+            "per_test": list(self.per_test),
+            "fitted": [
+                {
+                    "name": n,
+                    "value": float(v),
+                    "stderr": _json_number(float(s)),
+                    "unit": u,
+                }
+                for n, v, s, u in fitted
+            ],
+            "correlation": _json_matrix(self.correlation),
+            "covariance": _json_matrix(self.covariance),
+            "singular_values": [_json_number(float(s)) for s in self.singular_values],
+            "tests": [
+                {
+                    "id": tid,
+                    "samples": int(k),
+                    "rmse_mm": float(mm),
+                    "rmse_percent": float(pct),
+                }
+                for tid, k, mm, pct in self._per_test_rows()
+            ],
+            "loss_m2": float(self.loss),
+            "converged": bool(self.converged),
+            "message": self.message,
+            "num_steps": int(self.num_steps),
+            "start_losses": [_json_number(float(x)) for x in self.start_losses],
+            "warnings": list(self.warnings),
+        }
+        text = json.dumps(document, indent=2)
+        if path is not None:
+            pathlib.Path(path).write_text(text + "\n", encoding="utf-8")
+        return text
+
+    @classmethod
+    def from_json(cls, source: str | os.PathLike) -> "FitResult":
+        """Read a PARAMS.json written by [`jaxcable.FitResult.to_json`][].
+
+        **Arguments:**
+
+        - `source`: a path, or the JSON text itself (a string starting with `{`).
+
+        **Returns:**
+
+        A [`jaxcable.FitResult`][]; `result.model` is the fitted model, ready to
+        simulate.
+
+        **Raises:**
+
+        `ValueError` naming `source` for text that is not such a file, or a model
+        class jaxcable does not know.
+        """
+        is_text = isinstance(source, str) and source.lstrip().startswith("{")
+        where = "<json text>" if is_text else str(source)
+        try:
+            if is_text:
+                doc = parse_json(source, where)
+            else:
+                doc = read_json(source, "a PARAMS.json")
+        except ValueError as e:
+            # The reader's message names the file (and the line and column).
+            raise ValueError(f"`source` {e}") from None
+        if not isinstance(doc, dict) or doc.get("format") != "jaxcable-params":
+            raise ValueError(
+                f"`source` {where}: not a jaxcable PARAMS.json (no "
+                "'format': 'jaxcable-params')."
+            )
+        unknown = unknown_model(doc)
+        if unknown is not None:
+            raise ValueError(f"`source` {where}: {unknown}")
+        try:
+            return cls._from_document(doc)
+        except (KeyError, TypeError, ValueError) as e:
+            raise ValueError(
+                f"`source` {where}: malformed PARAMS.json ({e})."
+            ) from None
+
+    @classmethod
+    def _from_document(cls, doc: Mapping[str, Any]) -> "FitResult":
+        """The result of a decoded PARAMS.json whose models are known; a missing or
+        malformed entry raises `KeyError`, `TypeError` or `ValueError`."""
+        model = model_from_document(doc)
+        fitted = doc["fitted"]
+        tests = doc["tests"]
+
+        def matrix(key):
+            return np.array(
+                [[_from_json_number(c) for c in row] for row in doc[key]],
+                dtype=float,
+            ).reshape(len(fitted), len(fitted))
+
+        return cls(
+            model=model,
+            models=tuple(test_slice(model, i) for i in range(len(tests))),
+            names=tuple(p["name"] for p in fitted),
+            units=tuple(p.get("unit", "") for p in fitted),
+            values=np.array([p["value"] for p in fitted], float),
+            stderr=np.array([_from_json_number(p["stderr"]) for p in fitted]),
+            covariance=matrix("covariance"),
+            correlation=matrix("correlation"),
+            singular_values=np.array(
+                [_from_json_number(s) for s in doc.get("singular_values", [])]
+            ),
+            loss=float(doc["loss_m2"]),
+            rmse_mm=np.array([t["rmse_mm"] for t in tests], float),
+            rmse_percent=np.array([t["rmse_percent"] for t in tests], float),
+            test_ids=tuple(t["id"] for t in tests),
+            num_samples=np.array([t["samples"] for t in tests], int),
+            warnings=tuple(doc.get("warnings", [])),
+            converged=bool(doc["converged"]),
+            message=doc.get("message", ""),
+            num_steps=int(doc["num_steps"]),
+            start_losses=np.array(
+                [_from_json_number(x) for x in doc.get("start_losses", [])]
+            ),
+            per_test=tuple(doc.get("per_test", [])),
+        )

@@ -1,0 +1,269 @@
+"""The compiled fit kernel: a data-derived start, multi-start Levenberg-Marquardt with
+Jacobians through the simulation's scan, and the Jacobian at the optimum.
+"""
+
+import math
+from collections.abc import Callable
+from typing import Literal
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import jax.random as jr
+import lineax as lx
+import optimistix as optx
+from jaxtyping import Array, Bool, Float, PRNGKeyArray, PyTree
+
+from .problem import Problem
+
+
+class LevenbergMarquardt(optx.AbstractGaussNewton):
+    """Levenberg-Marquardt: optimistix's damped Newton descent in a classical trust
+    region, with the textbook cut-offs (Nocedal & Wright, Algorithm 4.1: shrink the
+    step by 4 below a ratio of actual to predicted reduction of 1/4, grow it above
+    3/4; here by 5). `optx.LevenbergMarquardt`'s constants (grow by 3.5 only above
+    0.99) took about twice the steps on the recovery tests' fits, where parameter
+    correlations keep the ratio below 0.99 while the damping is still too strong.
+
+    The damped step is solved by Cholesky on the normal equations (J^T J + lambda I,
+    p x p) rather than by QR of the tall (n + p, p) matrix: LAPACK's QR of a tall
+    matrix, through a multi-threaded OpenBLAS on a busy 2-core machine, took 10-60 ms
+    per step (its threads spin), several Jacobians' worth.
+    Squaring the condition number is harmless here: lambda > 0 bounds it, the
+    parameters are log-scaled, and the fit runs in float64 (a float32 fit of a
+    poorly identified problem may fail the solve; `throw=False` then reports it)."""
+
+    rtol: float
+    atol: float
+    norm: Callable = optx.max_norm
+    descent: optx.DampedNewtonDescent = optx.DampedNewtonDescent(
+        linear_solver=lx.Normal(lx.Cholesky())
+    )
+    search: optx.ClassicalTrustRegion = optx.ClassicalTrustRegion(
+        high_cutoff=0.75, low_cutoff=0.25, high_constant=5.0, low_constant=0.25
+    )
+    verbose: Callable = lambda **kwargs: None
+
+
+# The solver's residuals are r / sqrt(_DAMPING * sum(e_measured^2)). A modulus that
+# carries all the elongation has |dr / dlog E|^2 ~ sum(e^2), the largest curvature
+# scale of the problem, so Levenberg-Marquardt's initial damping (lambda = 1 in the
+# solver's units) is _DAMPING times it: nearly a Gauss-Newton step, which the trust
+# region shortens where the model is not yet linear (Marquardt's lambda_0 = tau max
+# diag(J^T J), with a small tau for a start believed close; 1e-4 took the fewest
+# steps over the recovery tests' models).
+_DAMPING = 1e-4
+# Secant iterations of the data-derived start.
+_SECANT_ITERATIONS = 4
+# The data-derived stiffness factor stays within [1 / _SECANT_RANGE, _SECANT_RANGE].
+_SECANT_RANGE = 30.0
+
+
+def residuals_and_jacobian(
+    problem: Problem, u: Float[Array, " p"], jac: Literal["fwd", "bwd"]
+) -> tuple[Float[Array, " residuals"], Float[Array, "residuals p"]]:
+    """The flat residuals (m) and their Jacobian in u, in one differentiated scan:
+    forward mode carries the p tangents through the scan together, reverse mode one
+    cotangent per residual."""
+
+    def flat(u):
+        r = jnp.ravel(problem.residuals(u))
+        return r, r
+
+    jacobian, r = (jax.jacfwd if jac == "fwd" else jax.jacrev)(flat, has_aux=True)(u)
+    return r, jacobian
+
+
+def _scaled_residual_fn(problem: Problem, jac: Literal["fwd", "bwd"], scale):
+    """fn(u, args) for optimistix: residuals / scale, whose JVP is a product with the
+    Jacobian computed with them.
+
+    Optimistix linearises fn and then materialises, transposes and applies the
+    linearisation. Through the scan each of those would be its own copy of the scan in
+    the compiled program; with this rule they are products with one dense (n, p)
+    matrix, and the scan is differentiated once per step.
+    """
+
+    @jax.custom_jvp
+    def scaled(u):
+        return jnp.ravel(problem.residuals(u)) / scale
+
+    @scaled.defjvp
+    def _(primals, tangents):
+        (u,), (du,) = primals, tangents
+        r, jacobian = residuals_and_jacobian(problem, u, jac)
+        return r / scale, (jacobian @ du) / scale
+
+    return lambda u, args: scaled(u)
+
+
+class _SecantCarry(eqx.Module):
+    """The secant iteration's carry: the current log stiffness factor, and the best
+    one so far with its loss."""
+
+    log_c: Float[Array, ""]
+    best_log_c: Float[Array, ""]
+    best_loss: Float[Array, ""]
+
+
+def _data_derived_start(
+    problem: Problem, u_user: Float[Array, " p"]
+) -> tuple[Float[Array, " p"], Bool[Array, " tests"]]:
+    """The user's start with every stiffness-like parameter scaled to fit the data.
+
+    Every stiffness-like fitted parameter is multiplied by c**k (for the linear models
+    this divides every strain by exactly c). The best c in the least-squares sense
+    follows from a secant (closed-form) fit: the multiplier
+    g = <e_model, e_measured> / <e_model, e_model> of the model's elongation is 1 / c
+    for a linear model, and a few such updates converge for the nonlinear ones. Each
+    iterate's loss is evaluated and the best kept, so the start never gets worse than
+    the user's. The first iterate (c = 1) is the user's start.
+
+    **Returns:**
+
+    `(u_start, start_ok)`: the start, and whether the user's start simulates finitely
+    on each test.
+    """
+    layout = problem.layout
+    dtype = u_user.dtype
+    power = jnp.concatenate(
+        [jnp.full((s,), k) for s, k in zip(layout.sizes, layout.stiffness)]
+    ).astype(dtype)
+    data = problem.data
+    measured = data.elongation * data.weight
+    iterations = _SECANT_ITERATIONS if any(k != 0 for k in layout.stiffness) else 1
+    limit = math.log(_SECANT_RANGE)
+
+    def secant(carry: _SecantCarry, _) -> tuple[_SecantCarry, Bool[Array, " tests"]]:
+        r = problem.residuals(u_user + power * carry.log_c)
+        loss = jnp.sum(r**2)
+        better = jnp.isfinite(loss) & (loss < carry.best_loss)
+        model = (r + data.elongation) * data.weight
+        g = jnp.sum(model * measured) / jnp.sum(model**2)
+        ok = jnp.isfinite(g) & (g > 0)
+        step = jnp.where(ok, -jnp.log(jnp.where(ok, g, 1.0)), 0.0)
+        new = _SecantCarry(
+            log_c=jnp.clip(carry.log_c + step, -limit, limit),
+            best_log_c=jnp.where(better, carry.log_c, carry.best_log_c),
+            best_loss=jnp.where(better, loss, carry.best_loss),
+        )
+        return new, jnp.all(jnp.isfinite(r), axis=1)
+
+    zero = jnp.zeros((), dtype)
+    init = _SecantCarry(zero, zero, jnp.asarray(jnp.inf, dtype))
+    final, finite = jax.lax.scan(secant, init, None, length=iterations)
+    return u_user + power * final.best_log_c, finite[0]
+
+
+class KernelOut(eqx.Module):
+    """What the fit kernel returns.
+
+    **Fields:**
+
+    - `starts`: the starts in u, the data-derived one first.
+    - `values`: the solution in u of each start.
+    - `results`: the solver's result of each start.
+    - `best_result`: the solver's result of the chosen start.
+    - `converged`: whether each start converged to finite residuals.
+    - `steps`: the solver steps of each start.
+    - `ssr`: the sum of squared residuals of each start, m^2 (inf where not finite).
+    - `best`: the index of the chosen start.
+    - `residuals`: the residuals at the chosen optimum, m.
+    - `gram`: J^T J at the chosen optimum, J the Jacobian of the residuals in u.
+    - `natural`: the natural values at the chosen optimum, laid out as u.
+    - `params`: the model's inexact-array fields at the chosen optimum.
+    - `natural_jacobian`: dx/du at the chosen optimum.
+    - `start_ok`: whether the user's start simulates finitely on each test.
+    """
+
+    starts: Float[Array, "starts p"]
+    values: Float[Array, "starts p"]
+    results: optx.RESULTS
+    best_result: optx.RESULTS
+    converged: Bool[Array, " starts"]
+    steps: Float[Array, " starts"]
+    ssr: Float[Array, " starts"]
+    best: Float[Array, ""]
+    residuals: Float[Array, "tests samples"]
+    gram: Float[Array, "p p"]
+    natural: Float[Array, " p"]
+    params: PyTree
+    natural_jacobian: Float[Array, "p p"]
+    start_ok: Bool[Array, " tests"]
+
+
+@eqx.filter_jit
+def fit_kernel(
+    problem: Problem,
+    u_user: Float[Array, " p"],
+    key: PRNGKeyArray,
+    solver: optx.AbstractGaussNewton,
+    max_steps: int,
+    jac: Literal["fwd", "bwd"],
+    num_starts: int,
+    spread: float,
+) -> KernelOut:
+    """The whole fit, compiled: the data-derived start, `num_starts` least-squares
+    solves and the chosen optimum (see [`jaxcable.fit`][]).
+
+    **Arguments:**
+
+    - `problem`: the least-squares problem.
+    - `u_user`: the user's start in u.
+    - `key`: the key of the start perturbations.
+    - `solver`: an optimistix Gauss-Newton-type solver.
+    - `max_steps`: solver steps per start.
+    - `jac`: the Jacobian's mode, `"fwd"` or `"bwd"`.
+    - `num_starts`: the number of starts (the data-derived one, then perturbed ones).
+    - `spread`: the standard deviation of the perturbations in u.
+
+    **Returns:**
+
+    A `KernelOut`.
+    """
+    u_start, start_ok = _data_derived_start(problem, u_user)
+    noise = spread * jr.normal(key, (num_starts - 1, problem.layout.size), u_user.dtype)
+    starts = jnp.concatenate([u_start[None], u_start[None] + noise])
+    data = problem.data
+    scale = jnp.sqrt(_DAMPING * jnp.sum((data.elongation * data.weight) ** 2))
+    fn = _scaled_residual_fn(problem, jac, scale)
+
+    def solve(u0):
+        sol = optx.least_squares(fn, solver, u0, max_steps=max_steps, throw=False)
+        # A Gauss-Newton-type solver's state holds the residuals and the linearised
+        # residual function at the returned (last accepted) point; with the rule of
+        # `_scaled_residual_fn` its matrix is the Jacobian, with no further scan.
+        f_info = sol.state.f_info
+        r = f_info.residual * scale
+        jacobian = f_info.jac.as_matrix() * scale
+        return sol.value, sol.result, sol.stats["num_steps"], r, jacobian
+
+    # One start after the other: a vmapped solve compiles about twice as slowly, and
+    # on a CPU the few starts gain little from batching.
+    values, results, steps, r, jacobian = jax.lax.map(solve, starts)
+    ssr = jnp.sum(r**2, axis=1)
+    ssr = jnp.where(jnp.isfinite(ssr), ssr, jnp.inf)
+    converged = (results == optx.RESULTS.successful) & jnp.isfinite(ssr)
+    # The best converged start; if none converged, the best finite one.
+    best = jnp.where(
+        jnp.any(converged),
+        jnp.argmin(jnp.where(converged, ssr, jnp.inf)),
+        jnp.argmin(ssr),
+    )
+    u_best = values[best]
+    return KernelOut(
+        starts=starts,
+        values=values,
+        results=results,
+        best_result=jax.tree_util.tree_map(lambda x: x[best], results),
+        converged=converged,
+        steps=steps,
+        ssr=ssr,
+        best=best,
+        residuals=jnp.reshape(r[best], data.time.shape),
+        gram=jacobian[best].T @ jacobian[best],
+        natural=problem.natural_flat(u_best),
+        params=problem.params(u_best),
+        natural_jacobian=jax.jacfwd(problem.natural_flat)(u_best),
+        start_ok=start_ok,
+    )
