@@ -30,7 +30,7 @@ from ._drive.simulate import (
     simulate_rate_test as simulate_rate_test,
     step as step,
 )
-from ._fit.fit import (
+from ._fit import (
     FitResult as FitResult,
     IdentifiabilityWarning as IdentifiabilityWarning,
     PaddedTests as PaddedTests,

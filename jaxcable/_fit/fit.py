@@ -21,26 +21,19 @@ import optimistix as optx
 from jaxtyping import PRNGKeyArray
 
 from .._models import AbstractCableModel
-
-# The names imported `as` themselves are re-exported: the package's top level still
-# imports the fit's public names from this module.
 from .data import (
-    PaddedTests as PaddedTests,
     as_test_list,
-    pad_tests as pad_tests,
     test_id,
 )
 from .parameters import test_slice
 from .problem import (
     Problem,
-    make_loss as make_loss,
     make_problem,
-    residuals as residuals,
 )
-from .result import FitResult as FitResult
+from .result import FitResult
 from .solver import KernelOut, LevenbergMarquardt, fit_kernel
 from .statistics import (
-    IdentifiabilityWarning as IdentifiabilityWarning,
+    IdentifiabilityWarning,
     Statistics,
     statistics,
 )
