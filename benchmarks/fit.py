@@ -83,7 +83,7 @@ import scipy  # noqa: E402
 import scipy.optimize  # noqa: E402
 
 import jaxcable as jc  # noqa: E402
-from jaxcable import _fit  # noqa: E402
+from jaxcable._fit import problem as fit_problem, solver as fit_solver  # noqa: E402
 
 
 SHARED = ("t_c", "eta0", "E2r", "t_r1")
@@ -184,15 +184,17 @@ def _run(name, repeats):
     jax_time, result = _median(run_jax, repeats)
 
     # The same problem, start and jitted forward, for scipy.
-    problem, u_user = _fit._layout_and_problem(start, tests, names, per_test, None, 0.0)
-    solver = _fit._LevenbergMarquardt(rtol=1e-6, atol=1e-6)
-    kernel = _fit._fit_kernel(
+    problem, u_user = fit_problem.make_problem(start, tests, names, per_test, None)
+    solver = fit_solver.LevenbergMarquardt(rtol=1e-6, atol=1e-6)
+    kernel = fit_solver.fit_kernel(
         problem, u_user, jax.random.key(0), solver, 256, "fwd", 1, 0.5
     )
     u0 = np.asarray(kernel.starts[0])
     scale = float(np.max(np.abs(np.asarray(problem.data.elongation))))
     forward = jax.jit(lambda u: jnp.ravel(problem.residuals(u)) / scale)
-    jacobian = jax.jit(lambda u: _fit._residuals_and_jacobian(problem, u, "fwd")[1])
+    jacobian = jax.jit(
+        lambda u: fit_solver.residuals_and_jacobian(problem, u, "fwd")[1]
+    )
 
     calls = [0]
 
