@@ -566,7 +566,7 @@ def _run_diagnosis(model, name, tests, *, args, progress, log):
 
 
 def _diagnose(args) -> int:
-    from .._diagnose import write_diagnosis_report
+    from .._report import write_diagnosis_report
 
     progress = _show_progress(args)
     # With --json, stdout carries the one JSON object; everything else goes to stderr.
@@ -884,7 +884,7 @@ def _demo_diagnose(args, out: pathlib.Path, tests, progress: bool):
     `out/diagnosis/`."""
     import jaxcable
 
-    from .._diagnose import write_diagnosis_report
+    from .._report import write_diagnosis_report
 
     print()
     print(
