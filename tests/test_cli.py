@@ -9,9 +9,8 @@ import numpy as np
 import pytest
 
 import jaxcable as jc
-from jaxcable import _cli
+from jaxcable import _cli, _synthetic
 from jaxcable._cli.main import main
-from jaxcable._papers import synthetic as _synthetic
 
 
 # One load-unload-reload history; every simulate test uses this length so that the
