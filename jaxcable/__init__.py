@@ -1,12 +1,11 @@
 import importlib.metadata
 
 from ._cable import Cable as Cable
-from ._diagnose.diagnose import (
+from ._diagnose import (
     Candidate as Candidate,
     Diagnosis as Diagnosis,
     diagnose as diagnose,
     residual_structure as residual_structure,
-    write_diagnosis_report as write_diagnosis_report,
 )
 from ._drive.analysis import (
     loop_energies as loop_energies,
@@ -103,16 +102,15 @@ from ._montecarlo import (
     Uniform as Uniform,
     monte_carlo as monte_carlo,
 )
-from ._papers.park import (
+from ._papers import (
     SK78_TARGETS as SK78_TARGETS,
     calibrate_sk78 as calibrate_sk78,
+    hidden_effect_dataset as hidden_effect_dataset,
+    hidden_effect_model as hidden_effect_model,
     sk78_qualitative_checks as sk78_qualitative_checks,
     sk78_targets_report as sk78_targets_report,
 )
-from ._papers.synthetic import (
-    hidden_effect_dataset as hidden_effect_dataset,
-    hidden_effect_model as hidden_effect_model,
-)
+from ._report import write_diagnosis_report as write_diagnosis_report
 from ._results import RESULTS as RESULTS
 from .cdpr.robot import (
     Robot as Robot,

@@ -441,7 +441,7 @@ def test_fit_report(burgers_fit):
 
 def test_fit_report_models_match_the_fit(burgers_fit):
     # The report's model curves are the fitted model's: their RMSE is the fit's.
-    from jaxcable._report.fit_report import model_elongations
+    from jaxcable._report import model_elongations
 
     *_, files, params, _ = burgers_fit
     result = jc.FitResult.from_json(params)
@@ -659,7 +659,7 @@ def test_fit_params_model_mismatch(burgers_fit, tmp_path, capsys):
 
 
 def test_progress_bar():
-    from jaxcable._report.fit_report import Progress
+    from jaxcable._report import Progress
 
     stream = io.StringIO()
     with Progress("reading", 4, stream=stream) as bar:
@@ -688,7 +688,7 @@ _DEMO_FIT = "E1c,E2c,eta0"
 
 
 def _small_dataset(folder):
-    from jaxcable._papers.synthetic import park_protocol, synthesize
+    from jaxcable._papers import park_protocol, synthesize
 
     folder.mkdir()
     for k, (length, force) in enumerate(((100.0, 100.0), (300.0, 150.0))):

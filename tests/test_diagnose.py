@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 import jaxcable as jc
-from jaxcable import _synthetic
 from jaxcable._cli.main import main
-from jaxcable._diagnose.diagnose import heldout_rmse, noise_level, residual_structure
+from jaxcable._diagnose import heldout_rmse, noise_level, residual_structure
+from jaxcable._papers import synthetic as _synthetic
 
 
 @pytest.fixture(scope="module")

@@ -12,8 +12,8 @@ import pytest
 
 import jaxcable as jc
 from jaxcable._cli.main import main
-from jaxcable._diagnose.diagnose import heldout_rmse
-from jaxcable._report.fit_report import model_elongations
+from jaxcable._diagnose import heldout_rmse
+from jaxcable._report import model_elongations
 
 
 # Issue 10's history: 0 -> 100 N in 300 s, hold 2 h, unload to 2 N in 300 s, rest 2 h,

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import jaxcable as jc
-from jaxcable import _sk78
+from jaxcable._papers import calibration, park
 
 
 # Errors (%) of the default set, as measured when it was fitted (samples_per_ramp=200).
@@ -77,22 +77,22 @@ def test_default_set_is_physical():
     # the short-term recovery is slower than Park's slowest crosshead.
     model = jc.IntegratedModel()
     assert 1.0 <= float(model.gamma) <= 5.0
-    e1r_min = _sk78._e1r_min(model.E1c, model.beta, model.gamma)
+    e1r_min = calibration._e1r_min(model.E1c, model.beta, model.gamma)
     assert float(model.E1r) > float(e1r_min) > float(model.E1c)
-    assert float(model.E2r) > float(_sk78._e2r_min(model.t_r1))
+    assert float(model.E2r) > float(calibration._e2r_min(model.t_r1))
     # Directly: the instantaneous strain at 0 N after each of 10 cycles is >= 0.
     n = 50
     protocol = jc.Protocol.cycles(150.0, cycles=10, samples_per_ramp=n)
     traj = jc.simulate_rate_test(model, jc.Cable(length=0.3), protocol)
     valleys = np.asarray(traj.parts.instantaneous)[2 * n :: 2 * n]
     assert valleys.shape == (10,) and np.all(valleys >= 0), valleys
-    assert float(np.max(traj.strain)) < _sk78._SET_STRAIN
+    assert float(np.max(traj.strain)) < calibration._SET_STRAIN
 
 
 def test_rests_end_no_shorter_than_new():
     # Soft targets of the fit: after 10 cycles to 100 N at 3 mm/min, the 100 and 300
     # mm cables end the 24, 48 and 72 h rests longer than new.
-    _, ok, rest_ends, _ = _sk78._simulate_targets(
+    _, ok, rest_ends, _ = park.simulate_targets(
         jc.IntegratedModel(), 100, None, throw=False
     )
     assert bool(np.all(ok))
@@ -106,7 +106,7 @@ def test_park_protocol_simulates(length, rate_mm_per_min, force):
     # Park's protocol (10 cycles, a rest, the re-stretch) at his lengths, rates and
     # forces: the re-stretch passes through the strain at which h = 1 + beta
     # eps**gamma starts, and must still have a loading time for every force sample.
-    from jaxcable._papers.synthetic import park_protocol
+    from jaxcable._papers import park_protocol
 
     cable = jc.Cable(length=length, speed=rate_mm_per_min * 1e-3 / 60)
     for rest_hours in (24.0, 48.0, 72.0):
@@ -143,8 +143,8 @@ def test_failed_simulation_reported_as_nan():
 
 def test_parametrisation_round_trip():
     model = jc.IntegratedModel()
-    back = _sk78._model_from_log(jnp.asarray(_sk78._log_from_model(model)))
-    for name in _sk78._FIELDS:
+    back = calibration._model_from_log(jnp.asarray(calibration._log_from_model(model)))
+    for name in calibration._FIELDS:
         assert float(getattr(back, name)) == pytest.approx(
             float(getattr(model, name)), rel=1e-9, abs=1e-9
         ), name
@@ -161,7 +161,7 @@ def test_target_gradient_matches_finite_differences():
 
     def recovery_300mm_72h(log_e3r):
         model = eqx.tree_at(lambda m: m.E3r, jc.IntegratedModel(), jnp.exp(log_e3r))
-        values, _ = _sk78._outputs(model, n, None, throw=False)
+        values, _ = park.target_values(model, n, None, throw=False)
         return values[8]
 
     # One compiled function gives the derivative and the finite differences.

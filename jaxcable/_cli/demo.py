@@ -16,11 +16,10 @@ import jax
 import numpy as np
 
 from .._cable import Cable
-from .._diagnose import write_diagnosis_report
 from .._drive import Protocol, simulate_rate_test
 from .._io import TestData, write_csv
 from .._models import PARK_IDENTIFIABLE, IntegratedModel
-from .._report import write_report
+from .._report import write_diagnosis_report, write_report
 from .._results import RESULTS
 from .common import CliError, make_folder, one_line, show_progress
 from .data import read_tests

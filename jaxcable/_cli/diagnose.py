@@ -7,9 +7,10 @@ import sys
 
 import jax
 
-from .._diagnose import diagnose, write_diagnosis_report
+from .._diagnose import diagnose
 from .._models import AbstractCableModel
 from .._progress import Progress
+from .._report import write_diagnosis_report
 from .common import CliError, make_folder, require_folder_of, show_progress
 from .data import data_options, describe_tests, read_tests
 from .models import resolve_model

@@ -1,0 +1,24 @@
+from .calibration import (
+    SK78_START as SK78_START,
+    Calibration as Calibration,
+    calibrate_sk78 as calibrate_sk78,
+)
+from .park import (
+    SK78_TARGETS as SK78_TARGETS,
+    Target as Target,
+    TargetRow as TargetRow,
+    park_protocol as park_protocol,
+    sk78_qualitative_checks as sk78_qualitative_checks,
+    sk78_targets_report as sk78_targets_report,
+)
+from .synthetic import (
+    BUNDLED_COMPLIANCE as BUNDLED_COMPLIANCE,
+    BUNDLED_EFFECT as BUNDLED_EFFECT,
+    HIDDEN_EFFECT_DESIGN as HIDDEN_EFFECT_DESIGN,
+    HIDDEN_EFFECTS as HIDDEN_EFFECTS,
+    bundled_dataset as bundled_dataset,
+    hidden_effect_dataset as hidden_effect_dataset,
+    hidden_effect_model as hidden_effect_model,
+    hidden_effect_protocol as hidden_effect_protocol,
+    synthesize as synthesize,
+)

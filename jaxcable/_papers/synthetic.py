@@ -2,31 +2,20 @@
 measurement noise. Used for the bundled data set (`jaxcable/data/`, made by
 `scripts/make_bundled_data.py`) and by tests that need data with known parameters."""
 
+import equinox as eqx
 import numpy as np
 
 from .._cable import Cable
 from .._drive import Protocol, simulate_rate_test
 from .._io import TestData
-from .._models import AbstractCableModel
-
-
-def park_protocol(
-    force_max: float,
-    *,
-    cycles: int = 10,
-    samples_per_ramp: int = 50,
-    rest_hours: float = 24.0,
-    rest_samples: int = 24,
-) -> Protocol:
-    """Park et al.'s long-term recovery protocol (Section 4): `cycles` load-unload
-    cycles 0 -> `force_max` (N) -> 0 at constant crosshead speed, a rest of
-    `rest_hours` at 0 N, then one more cycle to the same force (the re-stretch that
-    measures the recovery)."""
-    return Protocol.concatenate(
-        Protocol.cycles(force_max, cycles, samples_per_ramp),
-        Protocol.rest(rest_hours * 3600.0, rest_samples),
-        Protocol.cycles(force_max, 1, samples_per_ramp, start=False),
-    )
+from .._models import (
+    EXTENSIONS,
+    PARK_IDENTIFIABLE,
+    AbstractCableModel,
+    IntegratedModel,
+    TerminationCompliance,
+)
+from .park import park_protocol
 
 
 def synthesize(
@@ -119,8 +108,6 @@ def bundled_dataset(seed: int = 20261121) -> list[TestData]:
 
     A list of eight [`jaxcable.TestData`][] with an `id` in their metadata.
     """
-    from .._models import IntegratedModel, TerminationCompliance
-
     model = TerminationCompliance(IntegratedModel(), compliance=BUNDLED_COMPLIANCE)
     tests = []
     index = 0
@@ -148,7 +135,7 @@ def bundled_dataset(seed: int = 20261121) -> list[TestData]:
 
 
 # ----------------------------------------------------------------------------------
-# Data sets with one hidden effect (issue 4): the diagnosis must name it.
+# Data sets with one hidden effect: the diagnosis must name it.
 
 # Six tests, a balanced design: each length, rate, force level and temperature
 # appears twice (rates three times) and no two factors move together, so that the
@@ -163,10 +150,6 @@ HIDDEN_EFFECT_DESIGN = (
     (200.0, 3.0, 160.0, 36.0),
     (300.0, 30.0, 120.0, 10.0),
 )
-
-# The base parameters the generator perturbs (and the diagnosis refits): those of
-# `jaxcable._diagnose.DEFAULT_FIT`.
-_PERTURBED = ("E1c", "E1r", "E2c", "t_c", "eta0", "E2r", "t_r1", "E3r")
 
 # Each effect's size in the confusion matrix of docs/diagnosis.md ("size", its
 # extension's SIZE_FIELD in SIZE_UNIT; at or just above the detection limit measured by
@@ -239,21 +222,18 @@ def hidden_effect_model(
     (log-normal, standard deviation `spread`, from `seed`), wrapped in the extension
     `effect` of the given `size` (its `SIZE_FIELD`; default `HIDDEN_EFFECTS`), or
     unwrapped for `effect=None`."""
-    import equinox as eqx
-
-    from .._models import EXTENSIONS, IntegratedModel
-
     if effect is not None and effect not in EXTENSIONS:
         raise ValueError(
             f"`effect` must be None or one of {list(EXTENSIONS)}, got {effect!r}."
         )
     rng = np.random.default_rng(seed)
     base = IntegratedModel()
-    factors = np.exp(spread * rng.standard_normal(len(_PERTURBED)))
+    # The parameters the diagnosis refits by default.
+    factors = np.exp(spread * rng.standard_normal(len(PARK_IDENTIFIABLE)))
     base = eqx.tree_at(
-        lambda m: [getattr(m, n) for n in _PERTURBED],
+        lambda m: [getattr(m, n) for n in PARK_IDENTIFIABLE],
         base,
-        [getattr(base, n) * f for n, f in zip(_PERTURBED, factors)],
+        [getattr(base, n) * f for n, f in zip(PARK_IDENTIFIABLE, factors)],
     )
     if effect is None:
         return base

@@ -1,0 +1,157 @@
+"""The diagnosis report of `jaxcable diagnose --report DIR` and `jaxcable demo`: the
+diagnosis as JSON and markdown, and plots of the residuals before and after the named
+extension, of every candidate's held-out gain and of the residuals' structure."""
+
+import dataclasses
+import math
+import pathlib
+
+import numpy as np
+
+from .._diagnose import MIN_GAIN_PCT, Diagnosis, heldout_start, model_elongations
+from .._fit import as_test_list
+from .plots import panels, residual_axes, time_axis
+
+
+def _plot_residuals(path, diagnosis: Diagnosis, tests: list) -> None:
+    """Model minus measured elongation vs time, base and the named extension, one
+    panel per test, the held-out part shaded (PNG)."""
+    base = model_elongations(diagnosis.base_fit, tests)
+    named = (
+        diagnosis.candidate(diagnosis.named_cause)
+        if diagnosis.named_cause != "none"
+        else None
+    )
+    extended = model_elongations(named.fit, tests) if named is not None else None
+    fig, axes = panels(len(tests), 3.8, 2.7, 0.8)
+    for i, (ax, t) in enumerate(zip(axes, tests)):
+        x, label, log = time_axis(np.asarray(t.time, float))
+        ax.plot(x, 1e3 * (base[i] - t.elongation), color="0.5", lw=0.8, label="base")
+        if extended is not None:
+            ax.plot(
+                x,
+                1e3 * (extended[i] - t.elongation),
+                color="tab:blue",
+                lw=0.8,
+                label=f"+ {diagnosis.named_cause}",
+            )
+        if diagnosis.holdout is not None:
+            cut = heldout_start(len(t.time), diagnosis.holdout)
+            if cut < len(t.time):
+                ax.axvspan(x[cut], x[-1], color="tab:orange", alpha=0.12, lw=0)
+        residual_axes(ax, diagnosis.test_ids[i], label, log)
+        if i == 0:
+            ax.legend(fontsize=8)
+    fig.suptitle(
+        f"Residuals before/after (held-out part shaded): named cause "
+        f"{diagnosis.named_cause}"
+    )
+    fig.savefig(path, dpi=90)
+
+
+def _plot_candidates(path, diagnosis: Diagnosis) -> None:
+    """The held-out gain of every applicable candidate against the threshold (PNG)."""
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(7, 3.6), layout="constrained")
+    ax = fig.subplots()
+    shown = [c for c in diagnosis.candidates if c.applicable]
+    gains = [c.gain_pct if math.isfinite(c.gain_pct) else 0.0 for c in shown]
+    colours = ["tab:blue" if c.id == diagnosis.named_cause else "0.6" for c in shown]
+    ax.barh([c.id for c in shown], gains, color=colours)
+    ax.axvline(MIN_GAIN_PCT, color="tab:red", lw=0.8, ls="--", label="threshold")
+    ax.set_xlabel("held-out RMSE gain over the base [%]")
+    ax.set_title(
+        f"base held-out RMSE {diagnosis.base_heldout_rmse_mm:.3g} mm; named: "
+        f"{diagnosis.named_cause}",
+        fontsize=10,
+    )
+    ax.invert_yaxis()
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3, axis="x")
+    fig.savefig(path, dpi=90)
+
+
+def _plot_structure(path, diagnosis: Diagnosis) -> None:
+    """The correlation of the base residuals with each test condition (PNG)."""
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(7, 3.6), layout="constrained")
+    ax = fig.subplots()
+    corr = {
+        k: v for k, v in diagnosis.structure["correlation"].items() if v is not None
+    }
+    ax.barh(list(corr), list(corr.values()), color="tab:purple")
+    ax.axvline(0, color="0.3", lw=0.5)
+    ax.set_xlim(-1, 1)
+    ax.set_xlabel("correlation of the base residual with the condition")
+    ax.set_title(
+        f"lag-1 autocorrelation {diagnosis.structure['autocorrelation']:.2f} "
+        f"(white noise: < {diagnosis.structure['white_noise_band']:.2g})",
+        fontsize=10,
+    )
+    ax.invert_yaxis()
+    ax.grid(alpha=0.3, axis="x")
+    fig.savefig(path, dpi=90)
+
+
+def _candidate_table(diagnosis: Diagnosis) -> list[str]:
+    """Every candidate's scores as the lines of a markdown table."""
+    table = [
+        "| candidate | held-out RMSE mm | gain % | ΔBIC | size | ± | unit | significant |",
+        "| --- | ---: | ---: | ---: | ---: | ---: | --- | --- |",
+    ]
+    for c in diagnosis.candidates:
+        if not c.applicable:
+            table.append(f"| {c.id} | n/a | | | | | | {c.note} |")
+            continue
+        table.append(
+            f"| {c.id} | {c.heldout_rmse_mm:.4g} | {c.gain_pct:.1f} | "
+            f"{c.delta_bic:.1f} | {c.size:.4g} | {c.size_stderr:.2g} | "
+            f"{c.size_unit} | {'yes' if c.significant else 'no'} |"
+        )
+    return table
+
+
+def write_diagnosis_report(out, diagnosis: Diagnosis, tests) -> list[pathlib.Path]:
+    """Write the diagnosis report to the folder `out` (created if needed).
+
+    Files: `diagnosis.json` ([`jaxcable.Diagnosis.to_json`][]), `summary.md`,
+    `residuals.png` (model minus measured elongation vs time, base and the named
+    extension, before/after, held-out part shaded), `candidates.png` (held-out gain
+    of every candidate against the threshold) and `structure.png` (correlation of the
+    base residuals with each test condition).
+
+    **Arguments:**
+
+    - `out`: the folder.
+    - `diagnosis`: the [`jaxcable.Diagnosis`][] of `tests`.
+    - `tests`: the tests, as diagnosed.
+
+    **Returns:**
+
+    The paths written.
+    """
+    out = pathlib.Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    whole = [dataclasses.replace(t, mask=None) for t in as_test_list(tests)]
+    residuals_png = out / "residuals.png"
+    _plot_residuals(residuals_png, diagnosis, whole)
+    candidates_png = out / "candidates.png"
+    _plot_candidates(candidates_png, diagnosis)
+    structure_png = out / "structure.png"
+    _plot_structure(structure_png, diagnosis)
+
+    json_path = out / "diagnosis.json"
+    diagnosis.to_json(json_path)
+    summary = out / "summary.md"
+    summary.write_text(
+        "# jaxcable diagnose\n\n```\n"
+        + diagnosis.summary()
+        + "\n```\n\n"
+        + "\n".join(_candidate_table(diagnosis))
+        + "\n\n![residuals](residuals.png)\n![candidates](candidates.png)\n"
+        + "![structure](structure.png)\n",
+        encoding="utf-8",
+    )
+    return [json_path, summary, residuals_png, candidates_png, structure_png]

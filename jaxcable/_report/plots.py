@@ -1,0 +1,128 @@
+"""The plots of the reports: panel grids, a readable time axis, and per-test plots of
+force vs elongation (measured and model) and of the residuals against time.
+
+Figures use matplotlib's object-oriented API, not pyplot: no global backend or figure
+state, and `Figure.savefig` renders PNG with Agg.
+"""
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+from .._fit import FitResult
+from .._io import TestData
+
+
+def panels(n: int, width: float, height: float, title_height: float):
+    """A figure of `n` panels, at most four a row, and its first `n` axes.
+
+    **Arguments:**
+
+    - `n`: the number of panels.
+    - `width`, `height`: the size of one panel, inches.
+    - `title_height`: the height added for the figure's title, inches.
+
+    **Returns:**
+
+    `(figure, axes)`, the panels beyond `n` of the last row hidden.
+    """
+    from matplotlib.figure import Figure
+
+    cols = min(n, 4)
+    rows = math.ceil(n / cols)
+    fig = Figure(
+        figsize=(width * cols, height * rows + title_height), layout="constrained"
+    )
+    axes = np.atleast_1d(fig.subplots(rows, cols, squeeze=False)).ravel()
+    for ax in axes[n:]:
+        ax.set_visible(False)
+    return fig, axes[:n]
+
+
+def time_axis(time: np.ndarray) -> tuple[np.ndarray, str, bool]:
+    """(time in a readable unit, axis label, log scale?). A history whose span is
+    far longer than its samples suggest (a long rest sampled sparsely after densely
+    sampled cycles) is shown on a log axis of the time since its start, so that the
+    cycles are not squeezed into a spike."""
+    t = time - time[0]
+    span = float(t[-1]) if t.size else 0.0
+    dt = np.diff(t)
+    log = dt.size > 2 and span > 20 * dt.size * float(np.median(dt))
+    if span > 3 * 3600:
+        scale, unit = 3600, "h"
+    elif span > 3 * 60:
+        scale, unit = 60, "min"
+    else:
+        scale, unit = 1, "s"
+    if log:
+        # Time 0 has no place on a log axis; the first sample is not drawn.
+        return np.where(t > 0, t, np.nan) / scale, f"time since start [{unit}]", True
+    return t / scale, f"time [{unit}]", False
+
+
+def residual_axes(ax, title: str, label: str, log: bool) -> None:
+    """Label a panel of model minus measured elongation against time: the zero line,
+    the title, the time axis (`label`, log scale when `log`) and a grid."""
+    ax.axhline(0.0, color="0.3", lw=0.6)
+    ax.set_title(title, fontsize=9)
+    if log:
+        ax.set_xscale("log")
+    ax.set_xlabel(label)
+    ax.set_ylabel("model - measured [mm]")
+    ax.grid(alpha=0.3)
+
+
+def plot_loops(
+    path, result: FitResult, tests: Sequence[TestData], model: Sequence[np.ndarray]
+) -> None:
+    """Force vs elongation, measured and model, one panel per test (PNG)."""
+    fig, axes = panels(len(tests), 3.6, 3.0, 0.6)
+    for i, (ax, test, e_model) in enumerate(zip(axes, tests, model)):
+        mask = test.mask
+        e = 1e3 * test.elongation
+        ax.plot(e, test.force, color="0.55", lw=0.8, label="measured")
+        if not mask.all():
+            ax.plot(
+                np.where(mask, np.nan, e),
+                test.force,
+                color="tab:orange",
+                lw=0.8,
+                label="masked (not fitted)",
+            )
+        ax.plot(1e3 * e_model, test.force, color="tab:blue", lw=1.0, label="model")
+        ax.set_title(
+            f"{result.test_ids[i]}\nRMSE {result.rmse_mm[i]:.3g} mm "
+            f"({result.rmse_percent[i]:.3g} %)",
+            fontsize=9,
+        )
+        ax.set_xlabel("elongation [mm]")
+        ax.set_ylabel("force [N]")
+        ax.grid(alpha=0.3)
+        if i == 0:
+            ax.legend(fontsize=8)
+    fig.suptitle(f"{type(result.model).__name__}: measured vs model")
+    fig.savefig(path, dpi=90)
+
+
+def plot_residuals(
+    path, result: FitResult, tests: Sequence[TestData], model: Sequence[np.ndarray]
+) -> None:
+    """Model minus measured elongation vs time, one panel per test (PNG)."""
+    fig, axes = panels(len(tests), 3.6, 2.6, 0.6)
+    for i, (ax, test, e_model) in enumerate(zip(axes, tests, model)):
+        t, label, log = time_axis(test.time)
+        r = 1e3 * (e_model - test.elongation)
+        ax.plot(t, np.where(test.mask, r, np.nan), color="tab:blue", lw=0.8)
+        if not test.mask.all():
+            ax.plot(
+                t,
+                np.where(test.mask, np.nan, r),
+                color="tab:orange",
+                lw=0.8,
+                label="masked (not fitted)",
+            )
+            ax.legend(fontsize=8)
+        residual_axes(ax, result.test_ids[i], label, log)
+    fig.suptitle(f"{type(result.model).__name__}: residuals")
+    fig.savefig(path, dpi=90)
