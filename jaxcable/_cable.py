@@ -6,8 +6,6 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from ._custom_types import ScalarLike
-
 
 def _is_concrete(x) -> bool:
     return not isinstance(x, jax.core.Tracer)
@@ -84,10 +82,3 @@ def check_scalar_cable(cable: Cable) -> None:
                 f"`cable.{name}` has shape {shape}; the kernels simulate one cable. "
                 "For a batch, `jax.vmap` over the Cable (or use the batched front ends)."
             )
-
-
-def as_scalar(x: ScalarLike, name: str) -> Float[Array, ""]:
-    x = jnp.asarray(x)
-    if x.shape != ():
-        raise ValueError(f"`{name}` must be a scalar, got shape {x.shape}.")
-    return x
