@@ -109,32 +109,37 @@ def creep_strain(
 def recovery(
     previous: Float[Array, ""],
     previous_target: Float[Array, ""],
-    target: Float[Array, ""],
+    force: Float[Array, ""],
+    modulus_area: Float[Array, ""],
     dt: Float[Array, ""],
     retardation_time: Float[Array, ""],
-) -> Float[Array, ""]:
+) -> tuple[Float[Array, ""], Float[Array, ""]]:
     """Park Eq. 4 (short-term) and Eq. 7 (long-term): a recovery strain
-    q = q_target (1 - exp(-t / t_r)), the Kelvin-Voigt element that follows its
-    amplitude q_target with the retardation time t_r.
+    q = F / (E A) (1 - exp(-t / t_r)), a Kelvin-Voigt element (modulus E, retardation
+    time t_r) that follows its amplitude q_target = F / (E A).
 
     The paper starts the full amplitude at the reversal; here the amplitude follows
     the force (the model's docstring says how) and q obeys q' = (q_target - q) / t_r,
-    integrated exactly for an amplitude linear over the step, which is Eq. 4 / 7 for
-    an amplitude held from t = 0. Short-term: q_target = F_eq depth / (E2r A),
-    t_r = t_r1; long-term: q_target = (F_m - F) / (E3r A), t_r = t_r2 (Eq. 8).
+    integrated exactly for an amplitude linear over the step: Eq. 4 / 7 for an
+    amplitude held from t = 0. Short-term: F = F_eq depth, E = E2r, t_r = t_r1;
+    long-term: F = F_m - F (the drop below the largest force), E = E3r, t_r = t_r2
+    (`IntegratedModel.retardation_time_long`).
 
     **Arguments:**
 
     - `previous`, `previous_target`: q and q_target at the previous sample.
-    - `target`: q_target at this sample.
+    - `force`: F at this sample, N.
+    - `modulus_area`: E A, N.
     - `dt`: the step, s.
     - `retardation_time`: t_r, s.
 
     **Returns:**
 
-    q at this sample, dimensionless.
+    `(q, q_target)` at this sample, dimensionless.
     """
-    return retarded(previous, previous_target, target, dt, retardation_time)
+    target = force / modulus_area
+    q = retarded(previous, previous_target, target, dt, retardation_time)
+    return q, target
 
 
 def equivalent_force(
@@ -169,17 +174,19 @@ def combined_strain(
     """Park Eq. 9: the strain of a sample from its terms, in the reading that is
     continuous in the force history.
 
-    - instantaneous: the loading curve (Eq. 1 at F), or below the largest force F_m
-        the unloading line from the peak, Eq. 1 at F_m less (F_m - F) / (E1r A),
-        whichever is larger, so that it is never below the loading curve (and never
-        negative). On the first loading F = F_m and it is the loading curve;
+    - instantaneous: the loading curve (the static strain at F), or below the
+        largest force F_m the unloading line from the peak, the static strain at F_m
+        less (F_m - F) / (E1r A), whichever is larger, so that it is never below the
+        loading curve (and never negative). On the first loading F = F_m and it is
+        the loading curve;
     - plus the creep;
     - minus the two recoveries, scaled by s = min(1, creep / (short + long)): the
         recoveries remove at most the creep that produced them.
 
     **Arguments:**
 
-    - `static`, `static_max`: Eq. 1 at F and at F_m.
+    - `static`, `static_max`: the static strain ([`static_strain`][]) at F and at
+        F_m.
     - `drop`: F_m - F, N.
     - `unloading_modulus_area`: E1r A, N.
     - `creep`: the creep strain ([`creep_strain`][]).
@@ -413,13 +420,19 @@ class IntegratedModel(AbstractCableModel[IntegratedState]):
         # before any real loading (F_m at the level of the noise) the depth stays
         # proportional to the noise.
         depth = drop / jnp.maximum(force_max, tension_force(cable, force_max))
-        short_target = equivalent_force(impulse, t_total) * depth / (self.E2r * area)
-        long_target = drop / (self.E3r * area)
-        short = recovery(state.short, state.short_target, short_target, dt, self.t_r1)
-        long = recovery(
+        short, short_target = recovery(
+            state.short,
+            state.short_target,
+            equivalent_force(impulse, t_total) * depth,
+            self.E2r * area,
+            dt,
+            self.t_r1,
+        )
+        long, long_target = recovery(
             state.long,
             state.long_target,
-            long_target,
+            drop,
+            self.E3r * area,
             dt,
             self.retardation_time_long(cable),
         )
