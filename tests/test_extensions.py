@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import jaxcable as jc
-from jaxcable._models.extensions import (
+from jaxcable import (
     EXTENSIONS,
     BeddingIn,
     Hereditary,
@@ -28,9 +28,9 @@ from jaxcable._models.extensions import (
     log_shift_wlf,
 )
 
+from .helpers import PARK_CABLE as CABLE, PARK_MODEL as BASE
 
-BASE = jc.IntegratedModel()
-CABLE = jc.Cable(length=0.3)
+
 ORDER = (
     "hereditary",
     "second_retardation",
