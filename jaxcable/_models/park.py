@@ -228,7 +228,6 @@ class IntegratedState(eqx.Module):
         (Park Eq. 4 and 7).
     - `short_target`, `long_target`: the recovery amplitudes they relax towards at
         the previous sample.
-    - `parts`: the [`jaxcable.StrainParts`][] of the previous sample.
     """
 
     force: Float[Array, ""]
@@ -240,7 +239,6 @@ class IntegratedState(eqx.Module):
     long: Float[Array, ""]
     short_target: Float[Array, ""]
     long_target: Float[Array, ""]
-    parts: StrainParts
 
 
 # Parameters that must be finite and > 0 (moduli, viscosity, time constants).
@@ -369,7 +367,6 @@ class IntegratedModel(AbstractCableModel[IntegratedState]):
 
     def init(self, cable: Cable) -> IntegratedState:
         zero = state_zero(cable, self.E1c)
-        parts = StrainParts(zero, zero, zero, zero)
         return IntegratedState(
             force=zero,
             strain=zero,
@@ -380,7 +377,6 @@ class IntegratedModel(AbstractCableModel[IntegratedState]):
             long=zero,
             short_target=zero,
             long_target=zero,
-            parts=parts,
         )
 
     def advance(
@@ -450,6 +446,5 @@ class IntegratedModel(AbstractCableModel[IntegratedState]):
             long=long,
             short_target=short_target,
             long_target=long_target,
-            parts=parts,
         )
         return new_state, parts
