@@ -27,7 +27,7 @@ import numpy as np
 jax.config.update("jax_enable_x64", True)
 
 import jaxcable as jc
-from jaxcable._diagnose.diagnose import heldout_rmse
+from jaxcable._diagnose import heldout_rmse
 from jaxcable._papers.synthetic import (
     HIDDEN_EFFECT_DESIGN,
     HIDDEN_EFFECTS,

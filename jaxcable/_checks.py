@@ -1,12 +1,25 @@
-"""Validation at the Python boundary: raise `ValueError` naming the argument and the
-value before anything is traced or compiled. Traced values (inside a user's `jit` or
-`vmap`) are skipped here; the kernels flag them with `RESULTS` instead."""
+"""The one validation system: the checks of inputs and model parameters.
+
+Two halves with the same domains:
+
+- at the Python boundary (`require_*`, [`check_parameters`][]): raise `ValueError`
+    naming the argument and the value before anything is traced or compiled. Traced
+    values (inside a user's `jit`, `vmap` or `grad`) are skipped here;
+- traced ([`parameters_ok`][], [`all_ok`][], [`domain_result`][]): the boolean and
+    the `RESULTS` member that a model's `check` returns, so that the kernels flag
+    what the Python boundary could not see.
+"""
 
 import jax
+import jax.numpy as jnp
 import numpy as np
+from jaxtyping import Array, Bool
+
+from ._results import RESULTS
 
 
 def is_concrete(*xs) -> bool:
+    """True unless a leaf of `xs` is a tracer (inside `jit`, `vmap` or `grad`)."""
     return not any(
         isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(xs)
     )
@@ -17,19 +30,26 @@ def _show(v) -> str:
     return np.array2string(v, threshold=6, precision=6)
 
 
-def require_finite(name: str, value) -> None:
+def require_finite(name: str, value, *, allow_inf: bool = False) -> None:
+    """Raise `ValueError` naming `name` unless every element of `value` is finite
+    (with `allow_inf`: is not NaN)."""
     v = np.asarray(value, dtype=float)
-    bad = ~np.isfinite(v)
+    bad = np.isnan(v) if allow_inf else ~np.isfinite(v)
     if np.any(bad):
         idx = int(np.flatnonzero(bad.ravel())[0])
+        kind = "a number (not NaN)" if allow_inf else "finite"
         raise ValueError(
-            f"`{name}` must be finite; element {idx} is {v.ravel()[idx]} "
+            f"`{name}` must be {kind}; element {idx} is {v.ravel()[idx]} "
             f"(value {_show(v)})."
         )
 
 
-def require_positive(name: str, value, *, allow_zero: bool = False) -> None:
-    require_finite(name, value)
+def require_positive(
+    name: str, value, *, allow_zero: bool = False, allow_inf: bool = False
+) -> None:
+    """Raise `ValueError` naming `name` unless every element of `value` is finite
+    (or +inf, with `allow_inf`) and > 0 (>= 0 with `allow_zero`)."""
+    require_finite(name, value, allow_inf=allow_inf)
     v = np.asarray(value, dtype=float)
     bad = v < 0 if allow_zero else v <= 0
     if np.any(bad):
@@ -91,32 +111,73 @@ def check_parameters(
     *,
     positive: bool = True,
     allow_zero: bool = False,
+    allow_inf: bool = False,
     reason: str = "",
+    qualified: bool = True,
 ) -> None:
     """Raise `ValueError` naming the first concrete parameter field that is not finite
     (and, with `positive`, not > 0, or not >= 0 with `allow_zero`).
 
     The one construction-time check of every model's parameters. Traced fields (a
     model built inside `jit`, `vmap` or `grad`) are skipped: the model's traced
-    `check` flags them with `RESULTS.parameter_out_of_domain` instead.
+    `check` flags them with `RESULTS.parameter_out_of_domain` instead (see
+    [`parameters_ok`][], which takes the same domain).
 
     **Arguments:**
 
-    - `model_name`: the class name, for the message (`IntegratedModel.E1c`).
+    - `model_name`: the class name, for the message.
     - `model`: the model (any object with the fields as attributes).
     - `names`: the field names to check.
     - `positive`, `allow_zero`: the sign required besides finiteness.
-    - `reason`: appended to the message (why the domain is what it is).
+    - `allow_inf`: accept +inf (a modulus whose element is switched off).
+    - `reason`: appended to the message (why the domain is what it is, the unit).
+    - `qualified`: name a field `` `Model.field` `` (the models); with False,
+        `` Model `field` ``: the wrappers, whose fields a fit names by their own name.
     """
     for name in names:
         value = getattr(model, name)
         if not is_concrete(value):
             continue
-        label = f"{model_name}.{name}"
+        label = f"{model_name}.{name}" if qualified else name
+        prefix = "" if qualified else f"{model_name} "
         try:
             if positive:
-                require_positive(label, value, allow_zero=allow_zero)
+                require_positive(
+                    label, value, allow_zero=allow_zero, allow_inf=allow_inf
+                )
             else:
-                require_finite(label, value)
+                require_finite(label, value, allow_inf=allow_inf)
         except (TypeError, ValueError) as e:
-            raise ValueError(f"{e} {reason}".rstrip()) from None
+            raise ValueError(f"{prefix}{e} {reason}".rstrip()) from None
+
+
+def all_ok(*conditions) -> Bool[Array, ""]:
+    """True where every condition holds for every element (traced)."""
+    ok = jnp.array(True)
+    for c in conditions:
+        ok = ok & jnp.all(c)
+    return ok
+
+
+def parameters_ok(
+    model,
+    names,
+    *,
+    positive: bool = True,
+    allow_zero: bool = False,
+    allow_inf: bool = False,
+) -> Bool[Array, ""]:
+    """The traced counterpart of [`check_parameters`][]: True where every named field
+    of `model` is in the same domain."""
+    conditions = []
+    for name in names:
+        v = getattr(model, name)
+        conditions.append(~jnp.isnan(v) if allow_inf else jnp.isfinite(v))
+        if positive:
+            conditions.append(v >= 0 if allow_zero else v > 0)
+    return all_ok(*conditions)
+
+
+def domain_result(ok: Bool[Array, ""], result: RESULTS = RESULTS.successful) -> RESULTS:
+    """`result` where `ok`, else `RESULTS.parameter_out_of_domain` (traced)."""
+    return RESULTS.where(ok, result, RESULTS.parameter_out_of_domain)

@@ -3,6 +3,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+import jaxcable as jc
+
+
+# Park's 3 mm cable, 300 mm long, and the default (SK78) integrated model.
+PARK_CABLE = jc.Cable(length=0.3)
+PARK_MODEL = jc.IntegratedModel()
+
 
 def tree_allclose(x, y, *, rtol=1e-10, atol=1e-12) -> bool:
     same = jax.tree_util.tree_structure(x) == jax.tree_util.tree_structure(y)
@@ -37,3 +44,26 @@ def leaf_names(model):
     params, _ = eqx.partition(model, eqx.is_inexact_array)
     paths = jax.tree_util.tree_flatten_with_path(params)[0]
     return [jax.tree_util.keystr(p) for p, _ in paths]
+
+
+def asymmetric_five_element():
+    """A five-element model with distinct loading and unloading sets, compliant and
+    with seconds-scale retardation times, so that every term of Piao Eq. 1-3 is
+    visible in the strain."""
+    return jc.FiveElementModel(
+        E_L1=2.0e10,
+        E_L2=9.5e9,
+        E_L3=5.0e10,
+        eta_L2=1.0e10,
+        eta_L3=1.0e12,
+        E_UL1=1.5e10,
+        E_UL2=6.0e9,
+        E_UL3=3.0e10,
+        eta_UL2=2.0e10,
+        eta_UL3=5.0e11,
+    )
+
+
+def floats(model):
+    """The model with Python-float array leaves, for NumPy reference formulas."""
+    return jax.tree.map(lambda x: float(x) if eqx.is_array(x) else x, model)

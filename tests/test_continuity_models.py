@@ -20,7 +20,7 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 import jaxcable as jc
-from jaxcable._models.extensions import (
+from jaxcable import (
     BeddingIn,
     Hereditary,
     SecondRetardation,
@@ -31,9 +31,15 @@ from jaxcable._models.extensions import (
     TerminationCompliance,
 )
 
+from .helpers import (
+    PARK_CABLE as CABLE,
+    PARK_MODEL as BASE,
+    asymmetric_five_element,
+    floats,
+)
+
 
 N = 400
-CABLE = jc.Cable(length=0.3)  # Park's 3 mm cable
 HOT = jc.Cable(length=0.3, temperature=313.15)  # 20 K above T_ref: a_T != 1
 AREA = float(CABLE.area)
 # jaxcable._models.kernels: the tension clock counts time at F < F_on by F / F_on, F_on =
@@ -48,10 +54,6 @@ def _strains(model, cable, time, forces):
     """Strain histories of a batch of force histories (one compilation per model)."""
     run = lambda f: jc.simulate_force_history(model, cable, time, f).strain  # noqa: E731
     return jax.vmap(run)(forces)
-
-
-def _floats(model):
-    return jax.tree.map(lambda x: float(x) if eqx.is_array(x) else x, model)
 
 
 # ----------------------------------------------------------------------------------
@@ -211,8 +213,8 @@ def _wrapped(extra):
     """C of an extension around IntegratedModel: the base's plus its own term."""
 
     def make(model, cable=CABLE):
-        base = _integrated(_floats(_innermost(model)), cable)
-        own = extra(_floats(model))
+        base = _integrated(floats(_innermost(model)), cable)
+        own = extra(floats(model))
         return lambda time, force, d: base(time, force, d) + own(time, force, d)
 
     return make
@@ -222,7 +224,7 @@ def _hereditary_term(m):
     # w (eps_ex - eps_eq): eps_ex is a Kelvin-Voigt strain on the tension clock (input
     # d / (E2c A); the clock change dT relaxes it by <= F_max / (E2c A) dT / t_c);
     # eps_eq is the base's Kelvin-Voigt creep (bounded as the base's creep).
-    inner = _floats(_innermost(m.base))
+    inner = floats(_innermost(m.base))
 
     def term(time, force, d):
         _, creep, _, _, dT = _integrated_terms(inner, CABLE, time, force, d)
@@ -239,7 +241,7 @@ def _stress_nonlinear_term(m):
     # creep's change: X / M is within [g_min - 1, g_max - 1]; X moves by
     # <= (max|g - 1| + TV(g)) dc (summation by parts, TV along the clean history)
     # + max|g'| d / A  M. So |delta extra| <= (3 max|g - 1| + TV(g)) dc + g' d M / A.
-    inner = _floats(_innermost(m.base))
+    inner = floats(_innermost(m.base))
 
     def term(time, force, d):
         _, creep, _, creep_clean, _ = _integrated_terms(inner, CABLE, time, force, d)
@@ -264,37 +266,24 @@ def _temperature(make_log_shift):
     # The base on reduced time t / a_T (a_T from the temperature, not the force).
     def make(model, cable=HOT):
         a_t = 10.0 ** float(make_log_shift(model)(cable.temperature))
-        base = _integrated(_floats(_innermost(model)), cable)
+        base = _integrated(floats(_innermost(model)), cable)
         return lambda time, force, d: base(time / a_t, force, d)
 
     return make
 
 
-BASE = jc.IntegratedModel()
-
 # (id, model, cable, bound maker)
 MODELS = [
-    ("hooke", jc.HookeModel(), CABLE, lambda m, c: _hooke(_floats(m))),
-    ("burgers", jc.BurgersModel(), CABLE, lambda m, c: _burgers(_floats(m))),
+    ("hooke", jc.HookeModel(), CABLE, lambda m, c: _hooke(floats(m))),
+    ("burgers", jc.BurgersModel(), CABLE, lambda m, c: _burgers(floats(m))),
     (
         "five_element_asym",
-        jc.FiveElementModel(
-            E_L1=2.0e10,
-            E_L2=9.5e9,
-            E_L3=5.0e10,
-            eta_L2=1.0e10,
-            eta_L3=1.0e12,
-            E_UL1=1.5e10,
-            E_UL2=6.0e9,
-            E_UL3=3.0e10,
-            eta_UL2=2.0e10,
-            eta_UL3=5.0e11,
-        ),  # fmt: skip
+        asymmetric_five_element(),
         CABLE,
-        lambda m, c: _five_element(_floats(m)),
+        lambda m, c: _five_element(floats(m)),
     ),
-    ("bouc_wen", jc.BoucWenModel(), CABLE, lambda m, c: _bouc_wen(_floats(m))),
-    ("integrated", BASE, CABLE, lambda m, c: _integrated(_floats(m), c)),
+    ("bouc_wen", jc.BoucWenModel(), CABLE, lambda m, c: _bouc_wen(floats(m))),
+    ("integrated", BASE, CABLE, lambda m, c: _integrated(floats(m), c)),
     (
         "hereditary",
         Hereditary(BASE, weight=1.0),

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import jaxcable as jc
-from jaxcable._models.extensions import (
+from jaxcable import (
     EXTENSIONS,
     BeddingIn,
     Hereditary,
@@ -28,9 +28,9 @@ from jaxcable._models.extensions import (
     log_shift_wlf,
 )
 
+from .helpers import PARK_CABLE as CABLE, PARK_MODEL as BASE
 
-BASE = jc.IntegratedModel()
-CABLE = jc.Cable(length=0.3)
+
 ORDER = (
     "hereditary",
     "second_retardation",
@@ -231,7 +231,7 @@ def test_hereditary_ramp_matches_exact_superposition():
     # MODEL_NOTES point 4: under F = F0 + k t (F0 applied at t = 0) the Kelvin-Voigt
     # term is exactly [F0 (1 - e) + k (t - t_c (1 - e))] / (E2c A), e = exp(-t / t_c),
     # when w = 1. F0 = 1 N is above the 0.2 N where the tension clock ramps in
-    # (`jaxcable._models.kernels.tension_weight`), so the clock is the real time (from 0 N a
+    # (`jaxcable._models.kernels.tension_time_step`), so the clock is the real time (from 0 N a
     # ramp would count its first F_on / k seconds in part).
     k, f0 = 0.5, 1.0  # N/s, N
     time = jnp.linspace(0.0, 200.0, TIME.shape[0])

@@ -7,6 +7,8 @@ import pytest
 import jaxcable
 from jaxcable._models.kernels import kelvin_voigt_step
 
+from .helpers import asymmetric_five_element, floats
+
 
 FIELDS = (
     "E_L1",
@@ -36,29 +38,9 @@ def _linear_model(**overrides):
     return jaxcable.FiveElementModel(**params, **unloading)
 
 
-def _asymmetric_model():
-    return jaxcable.FiveElementModel(
-        E_L1=2.0e10,
-        E_L2=9.5e9,
-        E_L3=5.0e10,
-        eta_L2=1.0e10,
-        eta_L3=1.0e12,
-        E_UL1=1.5e10,
-        E_UL2=6.0e9,
-        E_UL3=3.0e10,
-        eta_UL2=2.0e10,
-        eta_UL3=5.0e11,
-    )
-
-
-def _floats(model):
-    """The model with Python-float fields, for NumPy reference formulas."""
-    return jax.tree.map(float, model)
-
-
 def _compliance(model, t):
     """Creep compliance J(t) of Piao Eq. 1 (loading parameters), 1/Pa."""
-    m = _floats(model)
+    m = floats(model)
     return (
         1 / m.E_L1
         + (1 - np.exp(-m.E_L2 * t / m.eta_L2)) / m.E_L2
@@ -68,7 +50,7 @@ def _compliance(model, t):
 
 def _ramp_integral(model, t, start, end):
     """int_start^end J(t - s) ds for t >= end (the response to a unit stress rate)."""
-    model = _floats(model)
+    model = floats(model)
     out = (end - start) / model.E_L1
     for E, eta in ((model.E_L2, model.eta_L2), (model.E_L3, model.eta_L3)):
         tau = eta / E
@@ -84,7 +66,7 @@ def _ramp_integral(model, t, start, end):
 
 
 def test_constant_load_matches_piao_eq1():
-    model = _asymmetric_model()
+    model = asymmetric_five_element()
     force = 600.0
     sigma = force / float(CABLE.area)
     # A coarse, irregular grid: the update is exact, so the grid does not matter.
@@ -127,7 +109,7 @@ def test_load_ramp_unload_matches_superposition():
 def test_instant_unload_matches_piao_eq3():
     """Piao Eq. 3 as printed (the t_2 -> t_r limit), for t >= t_r."""
     model = _linear_model()
-    p = _floats(model)
+    p = floats(model)
     f0, t_r = 500.0, 12.0
     sigma0 = f0 / float(CABLE.area)
     step = eqx.filter_jit(jaxcable.step)
@@ -148,8 +130,8 @@ def test_instant_unload_matches_piao_eq3():
 
 
 def test_branch_families_use_their_own_parameters():
-    model = _asymmetric_model()
-    p = _floats(model)
+    model = asymmetric_five_element()
+    p = floats(model)
     f0, t_r = 500.0, 5.0
     sigma0 = f0 / float(CABLE.area)
     time = np.array([0.0, 1.0, t_r, t_r + 1e-9, 5.5, 6.0, 8.0, 15.0, 40.0, 100.0])
@@ -179,7 +161,7 @@ def test_branch_families_use_their_own_parameters():
 def test_direction_is_ignored():
     """No state depends on the sign of a force change: the drivers' `direction`
     (+1, -1, 0) does not change the step."""
-    model = _asymmetric_model()
+    model = asymmetric_five_element()
     advance = eqx.filter_jit(model.advance)
     state = model.init(CABLE)
     one = jnp.array(1, jnp.int32)
@@ -199,7 +181,7 @@ def test_reload_below_the_maximum_takes_the_recovery_back():
     previous maximum loads the L family again. (The old reading added every upward
     increment to the L family: sigma_L = 500 + 150 here, 500 + 150 + 150 after the
     last step.)"""
-    model = _asymmetric_model()
+    model = asymmetric_five_element()
     advance = eqx.filter_jit(model.advance)
     state = model.init(CABLE)
     area = float(CABLE.area)
@@ -209,7 +191,7 @@ def test_reload_below_the_maximum_takes_the_recovery_back():
         state, parts = advance(state, CABLE, x(1.0), x(force), one)
         np.testing.assert_allclose(state.sigma_L * area, sigma_L, rtol=1e-14)
         np.testing.assert_allclose(state.sigma_UL * area, sigma_UL, atol=1e-9)
-        p = _floats(model)
+        p = floats(model)
         np.testing.assert_allclose(
             parts.instantaneous,
             (sigma_L / p.E_L1 + sigma_UL / p.E_UL1) / area,
@@ -220,7 +202,7 @@ def test_reload_below_the_maximum_takes_the_recovery_back():
 def test_step_past_the_maximum_is_exact():
     """A step that passes the previous maximum mid-step is advanced exactly (split at
     the kink of the running maximum): the same strain as with a sample at the kink."""
-    model = _asymmetric_model()
+    model = asymmetric_five_element()
     # Load to 500 N, unload to 200 N, then a coarse reload to 800 N (passing 500 N at
     # 1/2 of the step), against the same history with a sample at 500 N.
     time = np.array([0.0, 2.0, 4.0, 6.0, 8.0])
@@ -239,7 +221,7 @@ def test_step_past_the_maximum_is_exact():
 def test_noise_does_not_accumulate_in_sigma_L():
     """Regression (issue 10): with the branch flag every up/down noise blip added its
     up-step to sigma_L, so sigma_L grew with the total variation of the noise."""
-    model = _asymmetric_model()
+    model = asymmetric_five_element()
     n = 200
     time = np.arange(n + 1.0)
     noise = 1e-3 * (-1.0) ** np.arange(n + 1)
@@ -248,7 +230,7 @@ def test_noise_does_not_accumulate_in_sigma_L():
     clean = jaxcable.simulate_force_history(
         model, CABLE, time, np.r_[0.0, np.full(n, 500.0)]
     )
-    p = _floats(model)
+    p = floats(model)
     compliance = sum(1 / getattr(p, k) for k in FIELDS if k.startswith("E_L")) + 2 * (
         sum(1 / getattr(p, k) for k in FIELDS if k.startswith("E_UL"))
     )
@@ -315,7 +297,7 @@ def _strain(model):
 
 
 def test_gradient_fd_and_vmap():
-    model = _asymmetric_model()
+    model = asymmetric_five_element()
     grad = eqx.filter_grad(lambda m: _loss_of_strain(_strain(m)))(model)
     # All central-difference perturbations as one vmapped batch of parameter sets.
     rel = 1e-6

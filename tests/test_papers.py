@@ -71,7 +71,7 @@ def test_cyclic_behaviour():
 
 
 def test_default_set_is_physical():
-    # The constraints of the fit (jaxcable._papers.park): h = 1 + beta eps**gamma is
+    # The constraints of the fit (jaxcable._papers.calibration): h = 1 + beta eps**gamma is
     # differentiable at eps = 0; the unloading is stiffer than the hardened loading
     # secant (instantaneous set >= 0 in every cycle to 100 N or more, strain <= 10 %);
     # the short-term recovery is slower than Park's slowest crosshead.

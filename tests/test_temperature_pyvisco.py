@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 import jaxcable as jc
-from jaxcable._models.extensions import TemperatureShiftWLF, log_shift_wlf
+from jaxcable import TemperatureShiftWLF, log_shift_wlf
 
 
 # Tolerances met, decades of log10 a_T.

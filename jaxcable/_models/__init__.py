@@ -1,27 +1,52 @@
+"""The cable models: the interface ([`AbstractCableModel`][], [`StrainParts`][]), Park's
+integrated model, Piao's five-element model and its parameter surfaces, the baselines,
+the extensions that wrap any of them ([`AbstractExtension`][]) and the one registry."""
+
 from .base import (
     AbstractCableModel as AbstractCableModel,
+    AbstractExtension as AbstractExtension,
     StrainParts as StrainParts,
 )
 from .baselines import (
     BoucWenModel as BoucWenModel,
+    BoucWenState as BoucWenState,
     BurgersModel as BurgersModel,
+    BurgersState as BurgersState,
     HookeModel as HookeModel,
+    HookeState as HookeState,
 )
 from .extensions import (
     EXTENSIONS as EXTENSIONS,
+    AbstractTemperatureShift as AbstractTemperatureShift,
+    BeddingIn as BeddingIn,
+    BeddingInState as BeddingInState,
+    Hereditary as Hereditary,
+    HereditaryState as HereditaryState,
+    SecondRetardation as SecondRetardation,
+    SecondRetardationState as SecondRetardationState,
+    SensorDrift as SensorDrift,
+    SensorDriftState as SensorDriftState,
+    StressNonlinearCreep as StressNonlinearCreep,
+    StressNonlinearCreepState as StressNonlinearCreepState,
+    TemperatureShift as TemperatureShift,
+    TemperatureShiftWLF as TemperatureShiftWLF,
     TerminationCompliance as TerminationCompliance,
+    log_shift_arrhenius as log_shift_arrhenius,
+    log_shift_wlf as log_shift_wlf,
 )
 from .park import (
     IntegratedModel as IntegratedModel,
+    IntegratedState as IntegratedState,
 )
 from .piao import (
+    PIAO_TABLE1 as PIAO_TABLE1,
     FiveElementModel as FiveElementModel,
     FiveElementState as FiveElementState,
 )
 from .piao_surface import (
-    PIAO_TABLE1 as PIAO_TABLE1,
     PIAO_TABLE3 as PIAO_TABLE3,
     ParameterSurface as ParameterSurface,
+    piao_five_element as piao_five_element,
 )
 from .registry import (
     BY_CLI_NAME as BY_CLI_NAME,

@@ -1,3 +1,7 @@
+"""What every cable model shares: the strain split by mechanism ([`StrainParts`][]), the
+model interface ([`AbstractCableModel`][]) and the interface of a model extension
+that wraps another model ([`AbstractExtension`][])."""
+
 import abc
 from typing import Generic, TypeVar
 
@@ -42,11 +46,6 @@ class StrainParts(eqx.Module):
         return (
             self.instantaneous + self.creep - self.recovery_short - self.recovery_long
         )
-
-
-def zero_parts(x) -> StrainParts:
-    z = jnp.zeros_like(x)
-    return StrainParts(z, z, z, z)
 
 
 class AbstractCableModel(eqx.Module, Generic[_State]):
@@ -116,9 +115,72 @@ class AbstractCableModel(eqx.Module, Generic[_State]):
         """
 
 
-def positive_result(*values) -> RESULTS:
-    """`parameter_out_of_domain` unless every value is finite and positive."""
-    ok = jnp.array(True)
-    for v in values:
-        ok = ok & jnp.all(jnp.isfinite(v) & (v > 0))
-    return RESULTS.where(ok, RESULTS.successful, RESULTS.parameter_out_of_domain)
+class AbstractExtension(AbstractCableModel[_State]):
+    """A physical effect that a base model lacks, as a wrapper around any
+    [`jaxcable.AbstractCableModel`][] (wrap, don't subclass), composable by nesting,
+    e.g. `SensorDrift(BeddingIn(IntegratedModel()))`.
+
+    A concrete extension declares `base` as its first field, then its own parameters,
+    and these class variables, read by the fit and the diagnosis:
+
+    - `EXTENSION_ID`: the stable id (a key of [`jaxcable.EXTENSIONS`][] for the
+        candidates of the diagnosis);
+    - `EFFECT_FIELDS`: its own parameters that a diagnosis fits together with the
+        base model's;
+    - `SIZE_FIELD`, `SIZE_UNIT`: the one field reported as the size of the effect,
+        and its unit;
+    - `FIT_INFO`: `{field: (transform, unit[, stiffness])}` for each fitted field,
+        with transform `"log"` (positive) or `"linear"` (either sign, scaled by
+        |start|), and the optional power with which the field follows a stiffness
+        scaling of the model;
+
+    and the class method `wrap(base)`. At the null value of its effect parameter an
+    extension reproduces its base model exactly. It receives `direction` only to pass
+    it on to the base.
+    """
+
+    base: eqx.AbstractVar[AbstractCableModel]
+
+    EXTENSION_ID: eqx.AbstractClassVar[str]
+    EFFECT_FIELDS: eqx.AbstractClassVar[tuple[str, ...]]
+    SIZE_FIELD: eqx.AbstractClassVar[str]
+    SIZE_UNIT: eqx.AbstractClassVar[str]
+    FIT_INFO: eqx.AbstractClassVar[dict[str, tuple]]
+
+    @classmethod
+    @abc.abstractmethod
+    def wrap(cls, base: AbstractCableModel) -> "AbstractExtension":
+        """The extension around `base` with small but nonzero start values of its
+        effect parameters for a fit (so that a log transform works and the gradient
+        is informative).
+
+        **Arguments:**
+
+        - `base`: the model to wrap.
+
+        **Returns:**
+
+        An instance of the extension.
+        """
+
+
+def add_parts(
+    parts: StrainParts,
+    *,
+    instantaneous: Float[Array, ""] | None = None,
+    creep: Float[Array, ""] | None = None,
+) -> StrainParts:
+    """`parts` with an extension's strain added to its instantaneous or creep part."""
+    if instantaneous is not None:
+        parts = eqx.tree_at(
+            lambda p: p.instantaneous, parts, parts.instantaneous + instantaneous
+        )
+    if creep is not None:
+        parts = eqx.tree_at(lambda p: p.creep, parts, parts.creep + creep)
+    return parts
+
+
+def state_zero(cable: Cable, *like) -> Float[Array, ""]:
+    """A scalar 0 of the dtype a model's state takes for `cable` and its parameters
+    `like` (at least the default float)."""
+    return jnp.zeros((), jnp.result_type(float, cable.length, *like))

@@ -1,6 +1,7 @@
-"""The baselines the papers argue against (MODEL_NOTES point 14): Hooke's law, the
-Burgers model and a Bouc-Wen hysteresis loop. Kept as models so that the argument can
-be measured on the same drivers and data."""
+"""The baselines the papers argue against: Hooke's law, the Burgers model and a
+Bouc-Wen hysteresis loop. Kept as models so that the argument (a polymer cable creeps,
+recovers and hardens, which none of them does fully) can be measured on the same
+drivers and data."""
 
 import math
 
@@ -12,9 +13,8 @@ from jaxtyping import Array, Float, Int
 
 from .. import _checks
 from .._cable import Cable
-from .._checks import check_parameters
 from .._results import RESULTS
-from .base import AbstractCableModel, StrainParts, positive_result
+from .base import AbstractCableModel, StrainParts, state_zero
 from .kernels import kelvin_voigt_step, loading_weight, play
 
 
@@ -43,10 +43,10 @@ class HookeModel(AbstractCableModel[HookeState]):
     E: Float[Array, "*batch"] = eqx.field(converter=jnp.asarray, default=2.2e9)
 
     def __check_init__(self):
-        check_parameters("HookeModel", self, ("E",))
+        _checks.check_parameters("HookeModel", self, ("E",))
 
     def check(self, cable: Cable) -> RESULTS:
-        return positive_result(self.E)
+        return _checks.domain_result(_checks.parameters_ok(self, ("E",)))
 
     def init(self, cable: Cable) -> HookeState:
         return HookeState()
@@ -81,6 +81,9 @@ class BurgersState(eqx.Module):
     stress: Float[Array, ""]
     kelvin_voigt: Float[Array, ""]
     dashpot: Float[Array, ""]
+
+
+_BURGERS_FIELDS = ("E1", "eta0", "E2", "eta2")
 
 
 class BurgersModel(AbstractCableModel[BurgersState]):
@@ -119,13 +122,13 @@ class BurgersModel(AbstractCableModel[BurgersState]):
     eta2: Float[Array, "*batch"] = eqx.field(converter=jnp.asarray, default=3.7e10)
 
     def __check_init__(self):
-        check_parameters("BurgersModel", self, ("E1", "eta0", "E2", "eta2"))
+        _checks.check_parameters("BurgersModel", self, _BURGERS_FIELDS)
 
     def check(self, cable: Cable) -> RESULTS:
-        return positive_result(self.E1, self.eta0, self.E2, self.eta2)
+        return _checks.domain_result(_checks.parameters_ok(self, _BURGERS_FIELDS))
 
     def init(self, cable: Cable) -> BurgersState:
-        zero = jnp.zeros((), jnp.result_type(float, self.E1, cable.length))
+        zero = state_zero(cable, self.E1)
         return BurgersState(stress=zero, kelvin_voigt=zero, dashpot=zero)
 
     def advance(
@@ -173,6 +176,9 @@ _ROS2_GAMMA = 1.0 - 2.0**-0.5
 
 # 1 N on the 3 mm cable of Park et al. (A = 7.07e-6 m^2): ~1.41e5 Pa.
 DEFAULT_BAND = 1.0 / (math.pi / 4 * 3e-3**2)
+
+# Bouc-Wen parameters that must be finite and > 0.
+_BOUC_WEN_POSITIVE = ("E", "sigma_y", "z_y", "A", "beta", "band")
 
 
 class BoucWenState(eqx.Module):
@@ -231,7 +237,7 @@ class BoucWenModel(AbstractCableModel[BoucWenState]):
 
         sign(d sigma) := 2 w - 1,   w = (sigma - c + band) / (2 band) in [0, 1]
 
-    (`jaxcable._memory.loading_weight`): 1 while the stress pushes the band up, -1
+    (`jaxcable._models.kernels.loading_weight`): 1 while the stress pushes the band up, -1
     while it pulls it down, and in between a function of the stress alone. Noise
     smaller than the band therefore traces no loop and leaves no drift: inside the band
     zeta obeys an ODE in sigma alone, so it returns to its value when the stress does.
@@ -309,10 +315,8 @@ class BoucWenModel(AbstractCableModel[BoucWenState]):
     substeps: int = eqx.field(static=True, default=8)
 
     def __check_init__(self):
-        check_parameters(
-            "BoucWenModel", self, ("E", "sigma_y", "z_y", "A", "beta", "band")
-        )
-        check_parameters("BoucWenModel", self, ("gamma", "n"), positive=False)
+        _checks.check_parameters("BoucWenModel", self, _BOUC_WEN_POSITIVE)
+        _checks.check_parameters("BoucWenModel", self, ("gamma", "n"), positive=False)
         if _checks.is_concrete(self.beta, self.gamma):
             if np.any(np.abs(self.gamma) > self.beta):
                 raise ValueError(
@@ -343,16 +347,14 @@ class BoucWenModel(AbstractCableModel[BoucWenState]):
         return self.E * self.z_y * (self.beta - self.gamma) * saturated < self.sigma_y
 
     def check(self, cable: Cable) -> RESULTS:
-        result = positive_result(
-            self.E, self.sigma_y, self.z_y, self.A, self.beta, self.band
+        ok = _checks.all_ok(
+            _checks.parameters_ok(self, _BOUC_WEN_POSITIVE),
+            (jnp.abs(self.gamma) <= self.beta) & (self.n >= 1) & self._monotone(),
         )
-        ok = jnp.all(
-            (jnp.abs(self.gamma) <= self.beta) & (self.n >= 1) & self._monotone()
-        )
-        return RESULTS.where(ok, result, RESULTS.parameter_out_of_domain)
+        return _checks.domain_result(ok)
 
     def init(self, cable: Cable) -> BoucWenState:
-        zero = jnp.zeros((), jnp.result_type(float, self.E, cable.length))
+        zero = state_zero(cable, self.E)
         # The band starts at its top (w = 1): the virgin loading is classical.
         return BoucWenState(stress=zero, zeta=zero, centre=zero - self.band)
 

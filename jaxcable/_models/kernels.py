@@ -8,11 +8,10 @@ Lipschitz-continuous in the force history (sup norm): a perturbation of size d o
 force sample moves each memory by at most a stated multiple of d.
 
 - [`running_max`][]: the largest force so far (moves by at most d).
-- [`tension_weight`][] / [`tension_time_step`][]: the share of time that counts as
-  "under tension", a ramp from 0 at 0 N to 1 at F_on (`tension_force`: a tenth of
-  the largest force so far, at least 1e-4 of the breaking load; time at F < F_on
-  counts F / F_on of its duration), integrated exactly over a step with a linear
-  force.
+- [`tension_time_step`][]: the time under tension of a step, the share of time that
+  counts as "under tension" (the tension weight min(F / F_on, 1), a ramp from 0 at
+  0 N to 1 at F_on; [`tension_force`][]: a tenth of the largest force so far, at least
+  1e-4 of the breaking load) integrated exactly over a step with a linear force.
 - [`play`][] / [`loading_weight`][]: the play (backlash) operator of half-width r and
   the loading weight w in [0, 1] it defines (1 while the force pushes the band up,
   0 while it pulls it down). Within the band the weight is a function of the force
@@ -47,16 +46,9 @@ def tension_force(cable: Cable, force_max: Float[Array, ""]) -> Float[Array, ""]
     )
 
 
-def tension_weight(
-    force: Float[Array, ""], cable: Cable, force_max: Float[Array, ""]
-) -> Float[Array, ""]:
-    """Share of time that counts as under tension at `force` (N): min(F / F_on, 1)
-    with F_on = [`tension_force`][]; 0 for F <= 0. Dimensionless."""
-    return jnp.clip(force / tension_force(cable, force_max), 0.0, 1.0)
-
-
 def _tension_primitive(force, f_on):
-    # G(F) = integral of tension_weight from 0 to F (N): F^2 / (2 F_on) below F_on.
+    # G(F) = integral of the tension weight min(F / F_on, 1) from 0 to F (N):
+    # F^2 / (2 F_on) below F_on.
     f = jnp.maximum(force, 0.0)
     return jnp.where(f < f_on, 0.5 * f * f / f_on, f - 0.5 * f_on)
 
@@ -69,7 +61,8 @@ def tension_time_step(
     force_max: Float[Array, ""],
 ) -> Float[Array, ""]:
     """Time under tension of a step of `dt` s over which the force goes linearly from
-    `force_prev` to `force` (N), s: the exact integral of [`tension_weight`][]
+    `force_prev` to `force` (N), s: the exact integral of the tension weight
+    min(F / F_on, 1), F_on = [`tension_force`][], 0 for F <= 0
     (dt (G(F1) - G(F0)) / (F1 - F0), G its primitive; the weight at the mean force
     when the force barely changes). `force_max`: the largest force so far, this
     step's included, N."""

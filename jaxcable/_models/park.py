@@ -1,3 +1,18 @@
+"""Park et al.'s integrated nonlinear dynamic model of a polymer cable
+([`IntegratedModel`][]), one function per equation of the paper:
+
+- Eq. 1, the static strain under hardening: [`static_strain`][];
+- Eq. 2, the hardening exponent: [`hardening_exponent`][];
+- Eq. 3, the Burgers creep (Kelvin-Voigt element and dashpot): [`creep_strain`][];
+- Eq. 4 and 7, the short- and long-term recoveries: [`recovery`][];
+- Eq. 5, the equivalent force: [`equivalent_force`][];
+- Eq. 8, the long-term retardation time: `IntegratedModel.retardation_time_long`;
+- Eq. 9, the strain from its terms: [`combined_strain`][].
+
+Eq. 6 (the crosshead's strain, strain rate times time) is the constraint with which
+the rate-driven simulation solves for the loading time, not part of the model.
+"""
+
 import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, Float, Int
@@ -5,7 +20,7 @@ from jaxtyping import Array, Float, Int
 from .. import _checks
 from .._cable import Cable
 from .._results import RESULTS
-from .base import AbstractCableModel, StrainParts, positive_result
+from .base import AbstractCableModel, StrainParts, state_zero
 from .kernels import (
     relaxation_average,
     retarded,
@@ -14,6 +29,183 @@ from .kernels import (
     tension_force,
     tension_time_step,
 )
+
+
+def hardening_exponent(
+    strain: Float[Array, ""], beta: Float[Array, ""], gamma: Float[Array, ""]
+) -> Float[Array, ""]:
+    """Park Eq. 2: the hardening exponent h = 1 + beta eps**gamma.
+
+    eps is the total strain of the previous sample (a negative strain counts as 0):
+    the exponent follows the history, which makes the model a causal recursion over
+    the samples. h >= 1 stiffens the cable while F < E1c A ([`static_strain`][]).
+
+    **Arguments:**
+
+    - `strain`: total strain of the previous sample, dimensionless.
+    - `beta`, `gamma`: the hardening parameters, dimensionless (>= 0).
+
+    **Returns:**
+
+    h, dimensionless.
+    """
+    return 1.0 + beta * safe_pow(jnp.maximum(strain, 0.0), gamma)
+
+
+def static_strain(
+    force: Float[Array, ""], compliance: Float[Array, ""], h: Float[Array, ""]
+) -> Float[Array, ""]:
+    """Park Eq. 1: the static (time-independent) strain (F / (E1c A))**h.
+
+    **Arguments:**
+
+    - `force`: the force, N (>= 0).
+    - `compliance`: 1 / (E1c A), 1/N.
+    - `h`: the hardening exponent ([`hardening_exponent`][]).
+
+    **Returns:**
+
+    The strain, dimensionless (0 at 0 N, with finite gradients there).
+    """
+    return safe_pow(force * compliance, h)
+
+
+def creep_strain(
+    impulse: Float[Array, ""],
+    t_total: Float[Array, ""],
+    t_c: Float[Array, ""],
+    modulus_area: Float[Array, ""],
+    viscosity_area: Float[Array, ""],
+) -> Float[Array, ""]:
+    r"""Park Eq. 3: the creep of the Burgers model, a Kelvin-Voigt element (E2c, t_c)
+    and a dashpot eta0 in series, under the equivalent force F_eq = I / T
+    ([`equivalent_force`][]) applied for the time under tension T:
+
+        c = F_eq (1 - exp(-T / t_c)) / (E2c A) + F_eq T / (eta0 A)
+          = I (1 - exp(-T / t_c)) / T / (E2c A) + I / (eta0 A).
+
+    The dashpot term is the exact dashpot strain for any force history; the
+    Kelvin-Voigt term is the paper's approximation of the hereditary integral (see
+    [`jaxcable.Hereditary`][] for the exact one). Written with I = \int F dt rather
+    than F_eq so that it stays finite, with finite gradients, at T = 0.
+
+    **Arguments:**
+
+    - `impulse`: I, N s.
+    - `t_total`: T, s.
+    - `t_c`: the creep retardation time, s.
+    - `modulus_area`: E2c A, N.
+    - `viscosity_area`: eta0 A, N s.
+
+    **Returns:**
+
+    The creep strain, dimensionless.
+    """
+    return impulse * (
+        relaxation_average(t_total, t_c) / modulus_area + 1.0 / viscosity_area
+    )
+
+
+def recovery(
+    previous: Float[Array, ""],
+    previous_target: Float[Array, ""],
+    force: Float[Array, ""],
+    modulus_area: Float[Array, ""],
+    dt: Float[Array, ""],
+    retardation_time: Float[Array, ""],
+) -> tuple[Float[Array, ""], Float[Array, ""]]:
+    """Park Eq. 4 (short-term) and Eq. 7 (long-term): a recovery strain
+    q = F / (E A) (1 - exp(-t / t_r)), a Kelvin-Voigt element (modulus E, retardation
+    time t_r) that follows its amplitude q_target = F / (E A).
+
+    The paper starts the full amplitude at the reversal; here the amplitude follows
+    the force (the model's docstring says how) and q obeys q' = (q_target - q) / t_r,
+    integrated exactly for an amplitude linear over the step: Eq. 4 / 7 for an
+    amplitude held from t = 0. Short-term: F = F_eq depth, E = E2r, t_r = t_r1;
+    long-term: F = F_m - F (the drop below the largest force), E = E3r, t_r = t_r2
+    (`IntegratedModel.retardation_time_long`).
+
+    **Arguments:**
+
+    - `previous`, `previous_target`: q and q_target at the previous sample.
+    - `force`: F at this sample, N.
+    - `modulus_area`: E A, N.
+    - `dt`: the step, s.
+    - `retardation_time`: t_r, s.
+
+    **Returns:**
+
+    `(q, q_target)` at this sample, dimensionless.
+    """
+    target = force / modulus_area
+    q = retarded(previous, previous_target, target, dt, retardation_time)
+    return q, target
+
+
+def equivalent_force(
+    impulse: Float[Array, ""], t_total: Float[Array, ""]
+) -> Float[Array, ""]:
+    r"""Park Eq. 5's equivalent force F_eq = I / T: the mean force over the time under
+    tension, with I = \int F dt and T counted from the first loading (carried across
+    cycles, so that creep accumulates over them). It stands for the force in the
+    Burgers terms ([`creep_strain`][], the short-term recovery of [`recovery`][]).
+
+    **Arguments:**
+
+    - `impulse`: I, N s.
+    - `t_total`: T, s (I itself while T = 0: nothing has loaded the cable).
+
+    **Returns:**
+
+    F_eq, N.
+    """
+    return impulse / jnp.where(t_total > 0, t_total, 1.0)
+
+
+def combined_strain(
+    static: Float[Array, ""],
+    static_max: Float[Array, ""],
+    drop: Float[Array, ""],
+    unloading_modulus_area: Float[Array, ""],
+    creep: Float[Array, ""],
+    short: Float[Array, ""],
+    long: Float[Array, ""],
+) -> StrainParts:
+    """Park Eq. 9: the strain of a sample from its terms, in the reading that is
+    continuous in the force history.
+
+    - instantaneous: the loading curve (the static strain at F), or below the
+        largest force F_m the unloading line from the peak, the static strain at F_m
+        less (F_m - F) / (E1r A), whichever is larger, so that it is never below the
+        loading curve (and never negative). On the first loading F = F_m and it is
+        the loading curve;
+    - plus the creep;
+    - minus the two recoveries, scaled by s = min(1, creep / (short + long)): the
+        recoveries remove at most the creep that produced them.
+
+    **Arguments:**
+
+    - `static`, `static_max`: the static strain ([`static_strain`][]) at F and at
+        F_m.
+    - `drop`: F_m - F, N.
+    - `unloading_modulus_area`: E1r A, N.
+    - `creep`: the creep strain ([`creep_strain`][]).
+    - `short`, `long`: the recovery strains ([`recovery`][]).
+
+    **Returns:**
+
+    The [`jaxcable.StrainParts`][].
+    """
+    inst = jnp.maximum(static_max - drop / unloading_modulus_area, static)
+    total_recovery = short + long
+    excess = total_recovery > creep
+    share = jnp.where(excess, creep / jnp.where(excess, total_recovery, 1.0), 1.0)
+    return StrainParts(
+        instantaneous=inst,
+        creep=creep,
+        recovery_short=short * share,
+        recovery_long=long * share,
+    )
 
 
 class IntegratedState(eqx.Module):
@@ -26,15 +218,16 @@ class IntegratedState(eqx.Module):
 
     - `force`: force of the previous sample, N.
     - `strain`: total strain of the previous sample (the epsilon_{i-1} of Park Eq. 2).
-    - `impulse`: integral of F dt since the first loading, N s (MODEL_NOTES point 6).
+    - `impulse`: integral of F dt since the first loading, N s (trapezoid rule over
+        every step: exact for a force linear between samples).
     - `t_total`: time under tension since the first loading, s (a step at a force
-        below 1e-4 of the breaking load counts in proportion to the force).
+        below F_on counts in proportion to the force; see
+        `jaxcable._models.kernels.tension_time_step`).
     - `force_max`: the largest force so far, N (F_f of Park Eq. 7 and 9).
     - `short`, `long`: short- and long-term recovery strains before the creep bound
         (Park Eq. 4 and 7).
     - `short_target`, `long_target`: the recovery amplitudes they relax towards at
         the previous sample.
-    - `parts`: the [`jaxcable.StrainParts`][] of the previous sample.
     """
 
     force: Float[Array, ""]
@@ -46,7 +239,6 @@ class IntegratedState(eqx.Module):
     long: Float[Array, ""]
     short_target: Float[Array, ""]
     long_target: Float[Array, ""]
-    parts: StrainParts
 
 
 # Parameters that must be finite and > 0 (moduli, viscosity, time constants).
@@ -57,9 +249,10 @@ class IntegratedModel(AbstractCableModel[IntegratedState]):
     r"""Park et al.'s integrated nonlinear dynamic model of a polymer cable, in a
     reading that is continuous in the force history.
 
-    Strain (dimensionless) of sample i, with A the cross-section, I = \int F dt, T the
-    time under tension since the first loading and F_m the largest force so far
-    (MODEL_NOTES points 2-7; `docs/continuity.md` derives and measures the reading):
+    Strain (dimensionless) of sample i, with A the cross-section, I = \int F dt (from
+    the first loading, trapezoid rule), T the time under tension since the first
+    loading (carried across cycles) and F_m the largest force so far
+    (`docs/continuity.md` derives and measures the reading):
 
     - instantaneous (Park Eq. 1-2 and the first terms of Eq. 9):
       e_i = max((F_m / (E1c A))**h - (F_m - F) / (E1r A), (F / (E1c A))**h),
@@ -69,8 +262,10 @@ class IntegratedModel(AbstractCableModel[IntegratedState]):
       the cable also reloads (the bedding-in of a rope: the first loading sets a
       permanent constructional elongation, later cycles below it are stiffer). The
       max keeps it at or above the loading curve, so it is never negative;
-    - creep (Park Eq. 5 with MODEL_NOTES point 2):
-      c = (I / T) (1 - exp(-T / t_c)) / (E2c A) + I / (eta0 A);
+    - creep (Park Eq. 3 under the equivalent force I / T of Eq. 5):
+      c = (I / T) (1 - exp(-T / t_c)) / (E2c A) + I / (eta0 A). The paper prints the
+      dashpot term as F_eq / (eta0 A), which is not a strain; F_eq T / (eta0 A) =
+      I / (eta0 A) is the Burgers dashpot of Eq. 3, exact for any force history;
     - recoveries (Park Eq. 4 and 7), each a Kelvin-Voigt strain q relaxing towards
       an amplitude set by how far the force has fallen below F_m,
       q' = (q_target - q) / t_r, with
@@ -105,13 +300,15 @@ class IntegratedModel(AbstractCableModel[IntegratedState]):
 
     Hysteresis is not modelled separately: it emerges from creep, hardening and
     recovery (Park Section 3.3). The equivalent force I / T replaces the hereditary
-    integral of the Kelvin-Voigt creep (MODEL_NOTES point 4); this is the paper's
-    model, kept as printed.
+    integral of the Kelvin-Voigt creep (exact for the dashpot, up to a factor 2 off
+    for the Kelvin-Voigt element under a long ramp; [`jaxcable.Hereditary`][] is the
+    exact superposition); this is the paper's model, kept as printed.
 
-    The default parameters are a Dyneema SK78 3 mm set obtained as MODEL_NOTES point 9
-    describes: `jaxcable.calibrate_sk78()` (Levenberg-Marquardt on the errors, in %, of
-    the numbers Park prints: creep ratio, residual elongations, Table 3; all < 5 %),
-    rounded to 4 digits; see `jaxcable._sk78` and `notebooks/01_papers.ipynb`.
+    The default parameters are a Dyneema SK78 3 mm set fitted to the numbers Park
+    prints (Table 1 of the fitted parameters is lost): [`jaxcable.calibrate_sk78`][]
+    (Levenberg-Marquardt on the errors, in %, of the creep ratio, the residual
+    elongations and Table 3; all < 5 %), rounded to 4 digits; see
+    `notebooks/01_papers.ipynb`.
 
     **Fields (SI):**
 
@@ -150,24 +347,26 @@ class IntegratedModel(AbstractCableModel[IntegratedState]):
         )
 
     def retardation_time_long(self, cable: Cable) -> Float[Array, ""]:
-        """Long-term retardation time t_r2 = lambda1 (L0 / v)^2 - lambda2, s (Eq. 8)."""
+        """Park Eq. 8: the long-term retardation time t_r2 = lambda1 (L0 / v)^2 -
+        lambda2, s, at the strain rate v / L0 of `cable`. It must be positive: `check`
+        flags a cable whose strain rate makes it not."""
         return self.lambda1 / cable.strain_rate**2 - self.lambda2
 
     def check(self, cable: Cable) -> RESULTS:
-        result = positive_result(
-            *(getattr(self, n) for n in _POSITIVE), self.retardation_time_long(cable)
+        t_r2 = self.retardation_time_long(cable)
+        ok = _checks.all_ok(
+            _checks.parameters_ok(self, _POSITIVE),
+            jnp.isfinite(t_r2) & (t_r2 > 0),
+            self.beta >= 0,
+            self.gamma >= 0,
+            # Eq. 1 stiffens only while F < E1c A; above it h > 1 would soften the
+            # cable.
+            self.E1c * cable.area > cable.breaking_load,
         )
-        # Eq. 1 stiffens only while F < E1c A; above it h > 1 would soften the cable.
-        ok = (
-            (self.beta >= 0)
-            & (self.gamma >= 0)
-            & (self.E1c * cable.area > cable.breaking_load)
-        )
-        return RESULTS.where(ok, result, RESULTS.parameter_out_of_domain)
+        return _checks.domain_result(ok)
 
     def init(self, cable: Cable) -> IntegratedState:
-        zero = jnp.zeros((), jnp.result_type(float, self.E1c, cable.length))
-        parts = StrainParts(zero, zero, zero, zero)
+        zero = state_zero(cable, self.E1c)
         return IntegratedState(
             force=zero,
             strain=zero,
@@ -178,7 +377,6 @@ class IntegratedModel(AbstractCableModel[IntegratedState]):
             long=zero,
             short_target=zero,
             long_target=zero,
-            parts=parts,
         )
 
     def advance(
@@ -193,57 +391,50 @@ class IntegratedModel(AbstractCableModel[IntegratedState]):
         # force change (the class docstring says why).
         del direction
         area = cable.area
-        # Trapezoid impulse (MODEL_NOTES point 5); time under tension (point 6), a
-        # continuous ramp near 0 N so that noise around 0 N during a rest neither
-        # counts the rest as loading nor switches it on and off.
+        # Trapezoid impulse, exact for a force linear over the step; time under
+        # tension, a continuous ramp near 0 N so that noise around 0 N during a rest
+        # neither counts the rest as loading nor switches it on and off.
         impulse = state.impulse + 0.5 * (state.force + force) * dt
         force_max = running_max(state.force_max, force)
         t_total = state.t_total + tension_time_step(
             state.force, force, dt, cable, force_max
         )
 
-        # Park Eq. 1-2 with h from the previous sample's total strain; Eq. 9's
-        # unloading line from the largest force, never below the loading curve.
+        # Eq. 1-2 with h from the previous sample's total strain, at F and at F_m.
         compliance_c = 1.0 / (self.E1c * area)
-        h = 1.0 + self.beta * safe_pow(jnp.maximum(state.strain, 0.0), self.gamma)
-        static = safe_pow(force * compliance_c, h)
-        static_max = safe_pow(force_max * compliance_c, h)
+        h = hardening_exponent(state.strain, self.beta, self.gamma)
+        static = static_strain(force, compliance_c, h)
+        static_max = static_strain(force_max, compliance_c, h)
         drop = force_max - force
-        inst = jnp.maximum(static_max - drop / (self.E1r * area), static)
 
-        # Park Eq. 5 with MODEL_NOTES point 2: F_eq (1 - e^{-T/t_c}) / (E2c A) + I/(eta0 A).
-        creep = impulse * (
-            relaxation_average(t_total, self.t_c) / (self.E2c * area)
-            + 1.0 / (self.eta0 * area)
+        creep = creep_strain(
+            impulse, t_total, self.t_c, self.E2c * area, self.eta0 * area
         )
 
         # Recovery amplitudes in proportion to the drop below the largest force
-        # (Park Eq. 4 and 7 at F = 0); each recovery follows its amplitude with its
-        # retardation time, exactly for an amplitude linear over the step.
-        f_eq = impulse / jnp.where(t_total > 0, t_total, 1.0)
-        # The depth's scale is at least F_on, so that before any real loading (F_m at
-        # the level of the noise) the depth stays proportional to the noise.
+        # (Park's amplitudes at F = 0). The depth's scale is at least F_on, so that
+        # before any real loading (F_m at the level of the noise) the depth stays
+        # proportional to the noise.
         depth = drop / jnp.maximum(force_max, tension_force(cable, force_max))
-        short_target = f_eq * depth / (self.E2r * area)
-        long_target = drop / (self.E3r * area)
-        short = retarded(state.short, state.short_target, short_target, dt, self.t_r1)
-        long = retarded(
+        short, short_target = recovery(
+            state.short,
+            state.short_target,
+            equivalent_force(impulse, t_total) * depth,
+            self.E2r * area,
+            dt,
+            self.t_r1,
+        )
+        long, long_target = recovery(
             state.long,
             state.long_target,
-            long_target,
+            drop,
+            self.E3r * area,
             dt,
             self.retardation_time_long(cable),
         )
 
-        # The recoveries remove at most the creep that produced them.
-        recovery = short + long
-        excess = recovery > creep
-        share = jnp.where(excess, creep / jnp.where(excess, recovery, 1.0), 1.0)
-        parts = StrainParts(
-            instantaneous=inst,
-            creep=creep,
-            recovery_short=short * share,
-            recovery_long=long * share,
+        parts = combined_strain(
+            static, static_max, drop, self.E1r * area, creep, short, long
         )
         new_state = IntegratedState(
             force=force,
@@ -255,6 +446,5 @@ class IntegratedModel(AbstractCableModel[IntegratedState]):
             long=long,
             short_target=short_target,
             long_target=long_target,
-            parts=parts,
         )
         return new_state, parts

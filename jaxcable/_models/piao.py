@@ -1,12 +1,39 @@
+"""Piao et al.'s five-element creep model ([`FiveElementModel`][]), one function per
+equation of the paper:
+
+- Eq. 1, one family (a spring and two Kelvin-Voigt elements) under a stress:
+    [`family_step`][];
+- Eq. 2-3, unloading as the superposition of an added negative stress on the
+    unloading family: [`superposed_strain`][];
+
+and Piao's Table 1 ([`PIAO_TABLE1`][]). The parameter surfaces (Eq. 5, Table 3) are in
+`piao_surface.py`.
+"""
+
 import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, Float, Int
 
+from .. import _checks
 from .._cable import Cable
-from .._checks import check_parameters
 from .._results import RESULTS
-from .base import AbstractCableModel, StrainParts, positive_result
+from .base import AbstractCableModel, StrainParts, state_zero
 from .kernels import kelvin_voigt_step, running_max
+
+
+PIAO_TABLE1: dict[str, float] = dict(
+    E_L2=9.5e9,
+    E_L3=5.0e10,
+    eta_L2=1.0e10,
+    eta_L3=1.0e13,
+    E_UL2=9.5e9,
+    E_UL3=5.0e10,
+    eta_UL2=1.0e10,
+    eta_UL3=1.0e13,
+)
+"""Piao Table 1, the loading parameters that do not depend on payload or length
+(E_L2, E_L3 in Pa, eta_L2, eta_L3 in Pa s), with the unloading ones (E_UL2, E_UL3,
+eta_UL2, eta_UL3) set equal to them: the unloading table (Table 2) is lost."""
 
 
 class FiveElementState(eqx.Module):
@@ -55,6 +82,87 @@ _FIVE_ELEMENT_FIELDS = (
 )
 
 
+def family_step(
+    q2: Float[Array, ""],
+    q3: Float[Array, ""],
+    stresses: tuple[Float[Array, ""], Float[Array, ""], Float[Array, ""]],
+    pieces: tuple[Float[Array, ""], Float[Array, ""]],
+    E1: Float[Array, ""],
+    E2: Float[Array, ""],
+    eta2: Float[Array, ""],
+    E3: Float[Array, ""],
+    eta3: Float[Array, ""],
+) -> tuple[Float[Array, ""], Float[Array, ""], Float[Array, ""]]:
+    """Piao Eq. 1: a spring E1 in series with two Kelvin-Voigt elements (E2, eta2)
+    and (E3, eta3), driven by one stress sigma. Under a step sigma applied at t = 0,
+
+        eps(t) = sigma / E1 + sigma / E2 (1 - exp(-E2 t / eta2))
+                            + sigma / E3 (1 - exp(-E3 t / eta3)),
+
+    a transient creep element (retardation time eta2 / E2) and a long-term one
+    (eta3 / E3). For any stress history each element obeys eta q' + E q = sigma(t);
+    here the stress is linear over each of two pieces of the step (from `stresses[0]`
+    to `stresses[1]` over `pieces[0]` s, then to `stresses[2]` over `pieces[1]` s)
+    and each element takes its exact exponential update over both (no time-step
+    error).
+
+    **Arguments:**
+
+    - `q2`, `q3`: the strains of the two elements at the start of the step.
+    - `stresses`: the stress at the start, at the end of the first piece and at the
+        end of the step, Pa.
+    - `pieces`: the lengths of the two pieces, s.
+    - `E1`, `E2`, `E3`: moduli, Pa; `eta2`, `eta3`: viscosities, Pa s.
+
+    **Returns:**
+
+    `(spring, q2, q3)`: the spring's strain and the two elements' strains at the end
+    of the step, dimensionless.
+    """
+    start, kink, end = stresses
+    h1, h2 = pieces
+
+    def element(q, E, eta):
+        q = kelvin_voigt_step(q, start, kink, h1, E, eta)
+        return kelvin_voigt_step(q, kink, end, h2, E, eta)
+
+    return end / E1, element(q2, E2, eta2), element(q3, E3, eta3)
+
+
+def superposed_strain(
+    loading: tuple[Float[Array, ""], Float[Array, ""], Float[Array, ""]],
+    unloading: tuple[Float[Array, ""], Float[Array, ""], Float[Array, ""]],
+) -> StrainParts:
+    """Piao Eq. 2-3: unloading as the Boltzmann superposition of the load and an added
+    stress -sigma_0 (a ramp while the payload is removed, then held), the added
+    stress acting on the unloading family (the parameters with subscript UL). The
+    strain is the sum of the two families' strains ([`family_step`][]): the loading
+    family driven by the largest stress so far, the unloading family by the drop
+    below it (<= 0).
+
+    Eq. 2 prints eta_UL2 in the exponent of the E_UL3 term; the superposition gives
+    eta_UL3 there, and that is what this sum computes. Eq. 3 (the strain after the
+    unloading) is the same sum with the unloading stress held.
+
+    **Arguments:**
+
+    - `loading`, `unloading`: `(spring, q2, q3)` of each family.
+
+    **Returns:**
+
+    The [`jaxcable.StrainParts`][]: both springs are `instantaneous`, the loading
+    elements `creep`, the unloading elements the two recoveries.
+    """
+    spring_L, q_L2, q_L3 = loading
+    spring_UL, q_UL2, q_UL3 = unloading
+    return StrainParts(
+        instantaneous=spring_L + spring_UL,
+        creep=q_L2 + q_L3,
+        recovery_short=-q_UL2,
+        recovery_long=-q_UL3,
+    )
+
+
 class FiveElementModel(AbstractCableModel[FiveElementState]):
     r"""Piao et al.'s five-element creep model: a linear spring in series with two
     Kelvin-Voigt elements, with separate loading (L) and unloading (UL) parameters.
@@ -70,7 +178,7 @@ class FiveElementModel(AbstractCableModel[FiveElementState]):
     describe unloading as adding a stress -sigma_0 (a ramp from t_r to t_2, then held),
     with the unloading parameters: this is the Boltzmann superposition of the load step
     and the unloading ramp. Eq. 2 prints eta_UL2 in the exponent of the E_UL3 term;
-    it is read as eta_UL3 (MODEL_NOTES point 10).
+    it is read as eta_UL3 (what the superposition gives).
 
     **Superposition reading, any force history.** The stress is split into a loading
     part, the largest stress so far, and an unloading part, the drop below it,
@@ -105,7 +213,8 @@ class FiveElementModel(AbstractCableModel[FiveElementState]):
     increment to the family of its branch, the sign of the force change) made sigma_L
     the sum of all upward increments: under a measured force every noise blip is a
     reversal, so sigma_L grew with the total variation of the noise and the strain
-    drifted (12 mm per N of noise on a 300 mm cable, `benchmarks/continuity.py`). Here
+    drifted (12 mm per N of noise on a 300 mm cable, measured by
+    `benchmarks/continuity.py`). Here
     a perturbation d of every force sample moves sigma_L by at most d / A and
     sigma_UL by at most 2 d / A, so the strain moves by at most
 
@@ -116,8 +225,9 @@ class FiveElementModel(AbstractCableModel[FiveElementState]):
     **Strain parts.** `instantaneous` = sigma_L / E_L1 + sigma_UL / E_UL1 (both springs),
     `creep` = q_L2 + q_L3, `recovery_short` = -q_UL2, `recovery_long` = -q_UL3.
 
-    **Default parameters.** Loading: Piao Table 1, E_L2 = 9.5e9 Pa, E_L3 = 5.0e10 Pa,
-    eta_L2 = 1.0e10 Pa s (tau_2 ~ 1.05 s), eta_L3 = 1.0e13 Pa s (tau_3 = 200 s). E_L1 is
+    **Default parameters.** Loading: Piao Table 1 ([`jaxcable.PIAO_TABLE1`][]),
+    E_L2 = 9.5e9 Pa, E_L3 = 5.0e10 Pa, eta_L2 = 1.0e10 Pa s (tau_2 ~ 1.05 s),
+    eta_L3 = 1.0e13 Pa s (tau_3 = 200 s). E_L1 is
     a function of payload and cable length in the paper (Table 3); the default
     2.2e14 Pa is that surface at the robot's maximum payload 65 kg on a 7.4 m cable, read
     as described in [`jaxcable.PIAO_TABLE3`][] (Pa, as Table 1's unit says). It makes
@@ -140,24 +250,40 @@ class FiveElementModel(AbstractCableModel[FiveElementState]):
     """
 
     E_L1: Float[Array, "*batch"] = eqx.field(converter=jnp.asarray, default=2.2e14)
-    E_L2: Float[Array, "*batch"] = eqx.field(converter=jnp.asarray, default=9.5e9)
-    E_L3: Float[Array, "*batch"] = eqx.field(converter=jnp.asarray, default=5.0e10)
-    eta_L2: Float[Array, "*batch"] = eqx.field(converter=jnp.asarray, default=1.0e10)
-    eta_L3: Float[Array, "*batch"] = eqx.field(converter=jnp.asarray, default=1.0e13)
+    E_L2: Float[Array, "*batch"] = eqx.field(
+        converter=jnp.asarray, default=PIAO_TABLE1["E_L2"]
+    )
+    E_L3: Float[Array, "*batch"] = eqx.field(
+        converter=jnp.asarray, default=PIAO_TABLE1["E_L3"]
+    )
+    eta_L2: Float[Array, "*batch"] = eqx.field(
+        converter=jnp.asarray, default=PIAO_TABLE1["eta_L2"]
+    )
+    eta_L3: Float[Array, "*batch"] = eqx.field(
+        converter=jnp.asarray, default=PIAO_TABLE1["eta_L3"]
+    )
     E_UL1: Float[Array, "*batch"] = eqx.field(converter=jnp.asarray, default=2.2e14)
-    E_UL2: Float[Array, "*batch"] = eqx.field(converter=jnp.asarray, default=9.5e9)
-    E_UL3: Float[Array, "*batch"] = eqx.field(converter=jnp.asarray, default=5.0e10)
-    eta_UL2: Float[Array, "*batch"] = eqx.field(converter=jnp.asarray, default=1.0e10)
-    eta_UL3: Float[Array, "*batch"] = eqx.field(converter=jnp.asarray, default=1.0e13)
+    E_UL2: Float[Array, "*batch"] = eqx.field(
+        converter=jnp.asarray, default=PIAO_TABLE1["E_UL2"]
+    )
+    E_UL3: Float[Array, "*batch"] = eqx.field(
+        converter=jnp.asarray, default=PIAO_TABLE1["E_UL3"]
+    )
+    eta_UL2: Float[Array, "*batch"] = eqx.field(
+        converter=jnp.asarray, default=PIAO_TABLE1["eta_UL2"]
+    )
+    eta_UL3: Float[Array, "*batch"] = eqx.field(
+        converter=jnp.asarray, default=PIAO_TABLE1["eta_UL3"]
+    )
 
     def __check_init__(self):
-        check_parameters("FiveElementModel", self, _FIVE_ELEMENT_FIELDS)
+        _checks.check_parameters("FiveElementModel", self, _FIVE_ELEMENT_FIELDS)
 
     def check(self, cable: Cable) -> RESULTS:
-        return positive_result(*(getattr(self, n) for n in _FIVE_ELEMENT_FIELDS))
+        return _checks.domain_result(_checks.parameters_ok(self, _FIVE_ELEMENT_FIELDS))
 
     def init(self, cable: Cable) -> FiveElementState:
-        zero = jnp.zeros((), jnp.result_type(float, self.E_L1, cable.length))
+        zero = state_zero(cable, self.E_L1)
         return FiveElementState(
             stress=zero, sigma_L=zero, q_L2=zero, q_L3=zero, q_UL2=zero, q_UL3=zero
         )
@@ -183,35 +309,39 @@ class FiveElementModel(AbstractCableModel[FiveElementState]):
         rise = jnp.where(passes, stress - state.stress, 1.0)
         split = jnp.where(passes, (state.sigma_L - state.stress) / rise, 1.0)
         stress_split = jnp.where(passes, state.sigma_L, stress)
-        h1, h2 = split * dt, (1.0 - split) * dt
-        ul0 = state.stress - state.sigma_L
-        ul_split = stress_split - state.sigma_L
-        ul1 = stress - sigma_L
-
-        def loading(q, E, eta):
-            q = kelvin_voigt_step(q, state.sigma_L, state.sigma_L, h1, E, eta)
-            return kelvin_voigt_step(q, state.sigma_L, sigma_L, h2, E, eta)
-
-        def unloading(q, E, eta):
-            q = kelvin_voigt_step(q, ul0, ul_split, h1, E, eta)
-            return kelvin_voigt_step(q, ul_split, ul1, h2, E, eta)
-
-        q_L2 = loading(state.q_L2, self.E_L2, self.eta_L2)
-        q_L3 = loading(state.q_L3, self.E_L3, self.eta_L3)
-        q_UL2 = unloading(state.q_UL2, self.E_UL2, self.eta_UL2)
-        q_UL3 = unloading(state.q_UL3, self.E_UL3, self.eta_UL3)
-        parts = StrainParts(
-            instantaneous=sigma_L / self.E_L1 + ul1 / self.E_UL1,
-            creep=q_L2 + q_L3,
-            recovery_short=-q_UL2,
-            recovery_long=-q_UL3,
+        pieces = (split * dt, (1.0 - split) * dt)
+        loading = family_step(
+            state.q_L2,
+            state.q_L3,
+            (state.sigma_L, state.sigma_L, sigma_L),
+            pieces,
+            self.E_L1,
+            self.E_L2,
+            self.eta_L2,
+            self.E_L3,
+            self.eta_L3,
+        )
+        unloading = family_step(
+            state.q_UL2,
+            state.q_UL3,
+            (
+                state.stress - state.sigma_L,
+                stress_split - state.sigma_L,
+                stress - sigma_L,
+            ),
+            pieces,
+            self.E_UL1,
+            self.E_UL2,
+            self.eta_UL2,
+            self.E_UL3,
+            self.eta_UL3,
         )
         new_state = FiveElementState(
             stress=stress,
             sigma_L=sigma_L,
-            q_L2=q_L2,
-            q_L3=q_L3,
-            q_UL2=q_UL2,
-            q_UL3=q_UL3,
+            q_L2=loading[1],
+            q_L3=loading[2],
+            q_UL2=unloading[1],
+            q_UL3=unloading[2],
         )
-        return new_state, parts
+        return new_state, superposed_strain(loading, unloading)

@@ -1,10 +1,14 @@
+"""Piao et al.'s parameter surfaces: a model parameter as a cubic polynomial of payload
+and cable length (Eq. 5, [`ParameterSurface`][]), the printed coefficients (Table 3,
+[`PIAO_TABLE3`][]) and the five-element model they give ([`piao_five_element`][])."""
+
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from .. import _checks
-from .piao import FiveElementModel
+from .piao import PIAO_TABLE1, FiveElementModel
 
 
 class ParameterSurface(eqx.Module):
@@ -51,13 +55,18 @@ class ParameterSurface(eqx.Module):
     def __call__(
         self, mass_kg: Float[ArrayLike, "*shape"], length_m: Float[ArrayLike, "*shape"]
     ) -> Float[Array, "*shape"]:
-        """Evaluate the surface at a payload `mass_kg` (kg) and cable length `length_m`
-        (m); arrays broadcast."""
+        """Piao Eq. 5: the surface at a payload `mass_kg` (kg) and a cable length
+        `length_m` (m); arrays broadcast.
+
+        **Returns:**
+
+        P(x, y) in the unit of the parameter (Pa for a modulus).
+        """
         mass = jnp.asarray(mass_kg)
         length = jnp.asarray(length_m)
         x, y = (mass, length) if self.first == "mass" else (length, mass)
         p = [self.coefficients[..., i] for i in range(9)]
-        # Piao Eq. 5, grouped in powers of x (Horner in x) to limit cancellation.
+        # Grouped in powers of x (Horner in x) to limit cancellation.
         return (
             p[0]
             + y * (p[2] + p[5] * y)
@@ -73,9 +82,10 @@ _TABLE3 = np.array(
 PIAO_TABLE3 = ParameterSurface(_TABLE3, first="length")
 """Piao Table 3 read as the loading spring modulus E_L1(m, l), Pa (illustrative preset).
 
-Table 3 prints nine coefficients without units or the parameter they belong to
-(MODEL_NOTES point 12). Evaluated as printed (x = mass in kg, y = length in m) the
-surface *rises* with cable length over most of the tested range, against the text
+Table 3 prints nine coefficients, in the order p00, p10, p01, p20, p11, p02, p30, p21,
+p12, without units or the parameter they belong to. Evaluated as printed (x = mass in
+kg, y = length in m) the surface *rises* with cable length over most of the tested
+range, against the text
 ("E_L1 increases with high payload and short cable length", Section 3.3 and 4). With
 the variables swapped, `first="length"` (x = length, y = mass), it rises with payload
 and falls with length over the experiments' range (payloads up to about 100 kg,
@@ -89,14 +99,9 @@ rigid and the elongation Piao fitted is carried by the Kelvin-Voigt elements. No
 rescaling is applied on purpose: the surface grows about as m^2, so any factor making
 the spring compliant would make the instantaneous elongation *fall* with payload
 (sigma / E_L1 ~ 1/m); taken as printed that term stays below 1e-6 strain on the
-paper's 6 mm rope and the model's elongation rises with payload. A different scale is a one-liner:
-`ParameterSurface(PIAO_TABLE3.coefficients * s, first="length")`.
+paper's 6 mm rope and the model's elongation rises with payload. A different scale is
+a one-liner: `ParameterSurface(PIAO_TABLE3.coefficients * s, first="length")`.
 """
-
-
-# Piao Table 1 (loading), also used for unloading since Table 2 is lost.
-PIAO_TABLE1 = dict(E_L2=9.5e9, E_L3=5.0e10, eta_L2=1.0e10, eta_L3=1.0e13)
-PIAO_TABLE1.update(E_UL2=9.5e9, E_UL3=5.0e10, eta_UL2=1.0e10, eta_UL3=1.0e13)
 
 
 def piao_five_element(

@@ -8,7 +8,7 @@ extensions and the base parameters refitted by default).
 
 import dataclasses
 
-from .base import AbstractCableModel
+from .base import AbstractCableModel, AbstractExtension
 from .baselines import BoucWenModel, BurgersModel, HookeModel
 from .extensions import EXTENSIONS
 from .park import IntegratedModel
@@ -136,7 +136,9 @@ def parameter_info(cls: type, field: str) -> ParameterInfo | None:
     entry = _BY_CLASS.get(cls)
     if entry is not None:
         return entry.parameters.get(field)
-    declared = getattr(cls, "FIT_INFO", {}).get(field)
+    if not issubclass(cls, AbstractExtension):
+        return None
+    declared = cls.FIT_INFO.get(field)
     return None if declared is None else ParameterInfo(*declared)
 
 
