@@ -47,28 +47,31 @@ from ._io import (
     read_test as read_test,
     write_csv as write_csv,
 )
-from ._models.base import (
+from ._models import (
+    EXTENSIONS as EXTENSIONS,
+    PIAO_TABLE3 as PIAO_TABLE3,
     AbstractCableModel as AbstractCableModel,
-    StrainParts as StrainParts,
-)
-from ._models.baselines import (
+    AbstractExtension as AbstractExtension,
+    BeddingIn as BeddingIn,
+    BeddingInState as BeddingInState,
     BoucWenModel as BoucWenModel,
     BoucWenState as BoucWenState,
     BurgersModel as BurgersModel,
     BurgersState as BurgersState,
-    HookeModel as HookeModel,
-    HookeState as HookeState,
-)
-from ._models.extensions import (
-    EXTENSIONS as EXTENSIONS,
-    BeddingIn as BeddingIn,
-    BeddingInState as BeddingInState,
+    FiveElementModel as FiveElementModel,
+    FiveElementState as FiveElementState,
     Hereditary as Hereditary,
     HereditaryState as HereditaryState,
+    HookeModel as HookeModel,
+    HookeState as HookeState,
+    IntegratedModel as IntegratedModel,
+    IntegratedState as IntegratedState,
+    ParameterSurface as ParameterSurface,
     SecondRetardation as SecondRetardation,
     SecondRetardationState as SecondRetardationState,
     SensorDrift as SensorDrift,
     SensorDriftState as SensorDriftState,
+    StrainParts as StrainParts,
     StressNonlinearCreep as StressNonlinearCreep,
     StressNonlinearCreepState as StressNonlinearCreepState,
     TemperatureShift as TemperatureShift,
@@ -76,18 +79,6 @@ from ._models.extensions import (
     TerminationCompliance as TerminationCompliance,
     log_shift_arrhenius as log_shift_arrhenius,
     log_shift_wlf as log_shift_wlf,
-)
-from ._models.park import (
-    IntegratedModel as IntegratedModel,
-    IntegratedState as IntegratedState,
-)
-from ._models.piao import (
-    FiveElementModel as FiveElementModel,
-    FiveElementState as FiveElementState,
-)
-from ._models.piao_surface import (
-    PIAO_TABLE3 as PIAO_TABLE3,
-    ParameterSurface as ParameterSurface,
     piao_five_element as piao_five_element,
 )
 from ._montecarlo import (

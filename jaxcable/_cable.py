@@ -4,14 +4,10 @@ data files (mm, mm/min, °C) to it."""
 import math
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
-import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-
-def _is_concrete(x) -> bool:
-    return not isinstance(x, jax.core.Tracer)
+from . import _checks
 
 
 # The fields of a Cable, in order (one place to list them for checks and batching).
@@ -74,15 +70,12 @@ class Cable(eqx.Module):
     def __check_init__(self):
         for name in CABLE_FIELDS:
             value = getattr(self, name)
-            if not _is_concrete(value):
+            if not _checks.is_concrete(value):
                 continue
-            v = np.asarray(value)
-            if not np.all(np.isfinite(v)):
-                raise ValueError(f"Cable `{name}` must be finite, got {v}.")
-            if not np.all(v > 0):
-                raise ValueError(
-                    f"Cable `{name}` must be positive (SI units), got {v}."
-                )
+            try:
+                _checks.require_positive(name, value)
+            except ValueError as e:
+                raise ValueError(f"Cable {str(e).rstrip('.')}, SI units.") from None
 
     @classmethod
     def from_mm(
