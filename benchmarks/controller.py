@@ -86,30 +86,30 @@ def main():
     import jax.numpy as jnp
 
     import jaxcable as jc
-    from jaxcable import _cdpr, _controller
+    from jaxcable import cdpr
 
     n = args.cables
-    robot = _cdpr.Robot()
+    robot = cdpr.Robot()
     lengths = jnp.linspace(6.5, 8.3, n)
     cables = robot.cables(lengths)
     forces = jnp.linspace(50.0, 260.0, n)
-    real = _cdpr.real_cables(jax.random.key(0), num_cables=n)
+    real = cdpr.real_cables(jax.random.key(0), num_cables=n)
     cases = [
         ("integrated", jc.IntegratedModel(), False),
-        ("five-element (Piao, live)", _controller.LiveFiveElement(), False),
+        ("five-element (Piao, live)", jc.LiveFiveElement(), False),
         ("Hooke", jc.HookeModel(), False),
         ("integrated + termination, per cable", real, True),
     ]
     rows = []
     for name, model, per_cable in cases:
         for throw in (True, False):
-            state = _controller.controller_init(model, cables, per_cable=per_cable)
+            state = jc.controller_init(model, cables, per_cable=per_cable)
 
             @jax.jit
             def control(
                 state, t, forces, model=model, per_cable=per_cable, throw=throw
             ):
-                return _controller.controller_step(
+                return jc.controller_step(
                     model,
                     cables,
                     state,
@@ -128,11 +128,11 @@ def main():
             )
 
     # The whole closed loop, amortised per sample inside one scan.
-    scenario = _cdpr.pick_and_place(args.scan_hours)
+    scenario = cdpr.pick_and_place(args.scan_hours)
     samples = int(scenario.time.shape[0])
     loop = {}
-    for name, model in _cdpr.compensation_models().items():
-        run = lambda: _cdpr.simulate_robot(robot, scenario, real, model)  # noqa: E731
+    for name, model in cdpr.compensation_models().items():
+        run = lambda: cdpr.simulate_robot(robot, scenario, real, model)  # noqa: E731
         jax.block_until_ready(run())
         reps = []
         for _ in range(3):

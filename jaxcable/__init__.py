@@ -103,19 +103,6 @@ from ._papers import (
 )
 from ._report import write_diagnosis_report as write_diagnosis_report
 from ._results import RESULTS as RESULTS
-from .cdpr.robot import (
-    Robot as Robot,
-    RobotRun as RobotRun,
-    Scenario as Scenario,
-    errors_and_jacobian as errors_and_jacobian,
-    forward_kinematics as forward_kinematics,
-    pick_and_place as pick_and_place,
-    position_loss as position_loss,
-    real_cables as real_cables,
-    simulate_robot as simulate_robot,
-    tension_distribution as tension_distribution,
-    tune_gain as tune_gain,
-)
 
 
 __version__ = importlib.metadata.version("jaxcable")

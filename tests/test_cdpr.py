@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 import jaxcable as jc
-from jaxcable import _cdpr as cdpr
-from jaxcable._drive.controller import GRAVITY
+from jaxcable import cdpr
+from jaxcable._drive import GRAVITY
 from jaxcable._models.extensions import TerminationCompliance
 
 
@@ -163,7 +163,7 @@ def test_tune_gain_lowers_the_error():
     assert history[-1]["rms_mm"] < 0.9 * history[0]["rms_mm"]
     assert np.all((np.asarray(gain) > 0.8) & (np.asarray(gain) < 1.25))
     # The Jacobian of the tuning is the forward-mode twin of the loss's gradient.
-    r, J = cdpr._residuals_and_jacobian(jnp.ones(8), ROBOT, sc, REAL, cdpr.NOMINAL)
+    r, J = cdpr.errors_and_jacobian(jnp.ones(8), ROBOT, sc, REAL, cdpr.NOMINAL)
     _, grad = cdpr.loss_and_grad(1.0, ROBOT, sc, REAL, cdpr.NOMINAL)
     T = sc.time.shape[0]
     np.testing.assert_allclose(2 * jnp.sum(J.T @ r) / T, grad, rtol=1e-8)

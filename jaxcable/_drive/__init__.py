@@ -1,6 +1,10 @@
+"""Driving a cable model through a history: protocols, the one scan kernel and its
+drives (force, rate, elongation), the controller API and cycle analysis."""
+
 from .analysis import (
     loop_energies as loop_energies,
     secant_stiffness as secant_stiffness,
+    split_cycles as split_cycles,
 )
 from .controller import (
     GRAVITY as GRAVITY,
@@ -9,14 +13,19 @@ from .controller import (
     controller_init as controller_init,
     controller_step as controller_step,
 )
+from .newton import Newton as Newton
 from .protocol import (
     Protocol as Protocol,
 )
 from .simulate import (
-    CableState as CableState,
     check_history as check_history,
-    init_state as init_state,
+    simulate_elongation_history as simulate_elongation_history,
     simulate_force_history as simulate_force_history,
     simulate_rate_test as simulate_rate_test,
     step as step,
+)
+from .state import (
+    CableState as CableState,
+    Trajectory as Trajectory,
+    init_state as init_state,
 )

@@ -9,7 +9,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from .._checks import is_concrete
-from .simulate import Trajectory
+from .state import Trajectory
 
 
 # One value per load-unload cycle (an alias keeps the jaxtyping string out of
@@ -77,7 +77,10 @@ def split_cycles(traj: Trajectory, *, tolerance: float = 0.0) -> list[tuple[int,
 def loop_energies(
     traj: Trajectory, cycles: Sequence[tuple[int, int]] | None = None
 ) -> PerCycle:
-    r"""Energy dissipated in each load-unload cycle, J (MODEL_NOTES point 13).
+    r"""Energy dissipated in each load-unload cycle, J.
+
+    Hysteresis is not a model of its own: the loop emerges from creep, hardening and
+    recovery, and its energy is how it is reported.
 
     The area of the force-elongation loop, \oint F dx, by the trapezoid rule over the
     samples of the cycle: the net work done on the cable from the start of the loading

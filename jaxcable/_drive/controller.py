@@ -28,7 +28,8 @@ from .._models import (
     StrainParts,
 )
 from .._results import RESULTS
-from .simulate import CableState, init_state, step
+from .simulate import step
+from .state import CableState, init_state
 
 
 GRAVITY = 9.80665  # m/s^2, standard gravity

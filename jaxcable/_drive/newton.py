@@ -1,3 +1,7 @@
+"""The scalar root finder of the drives: [`jaxcable.Newton`][] and `root_scalar`, which
+solves one sample's unknown (a loading time, a force) with Newton's method or any
+optimistix root finder, past turning points, differentiated implicitly."""
+
 from collections.abc import Callable
 from typing import Any
 

@@ -1,3 +1,6 @@
+"""[`jaxcable.Protocol`][]: the force samples of a rate-driven test (ramps, holds,
+rests, cycles), with its constructors, joining and padding."""
+
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
@@ -11,8 +14,8 @@ class Protocol(eqx.Module):
 
     On a ramp (`direction` +1 or -1) the crosshead moves at the cable's constant
     `speed`, and the time at which each force sample is reached is unknown: it is
-    solved per sample by Newton's method inside the scan (Park Eq. 5-6, MODEL_NOTES
-    point 5). On a hold (`direction` 0) the force is held for a given `duration`.
+    solved per sample by Newton's method inside the scan (Park Eq. 5-6). On a hold
+    (`direction` 0) the force is held for a given `duration`.
     Build protocols with the constructors below and join them with
     [`jaxcable.Protocol.concatenate`][]; pad with [`jaxcable.Protocol.pad`][] to vmap
     over protocols of different lengths.

@@ -1,0 +1,272 @@
+"""The three drives of the scan kernel, each a sample type and the step of one sample:
+
+- `ForceDrive`: a time-stamped force history (a robot's log): no solve;
+- `RateDrive`: a rate-driven test (a tensile tester): the time at which each force
+    sample is reached is solved by Newton's method (Park Eq. 5-6);
+- `ElongationDrive`: a time-stamped elongation history (displacement control):
+    the force of each sample is solved by Newton's method.
+"""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import optimistix as optx
+from jax.ad_checkpoint import checkpoint_name
+from jaxtyping import Array, Bool, Float, Int
+
+from .._cable import Cable
+from .._models import AbstractCableModel, StrainParts
+from .newton import Newton, root_scalar
+from .protocol import Protocol
+from .scan import SOLUTION, AbstractDrive, AbstractSample
+from .state import CableState, commit, direction, init_state, sample_result
+
+
+# Residuals are relative strain errors, with this floor on the strain scale so that a
+# nearly unloaded cable is solved to an absolute strain accuracy of floor * tol.
+_STRAIN_FLOOR = 1e-4
+
+
+def default_solver(dtype) -> Newton:
+    """The solver of the drives that solve per sample, unless one is given."""
+    # float32 resolves a strain to ~1e-7 relative; ask for a little above that.
+    tol = 1e-12 if jnp.dtype(dtype) == jnp.float64 else 2e-6
+    return Newton(tol=tol, max_steps=32)
+
+
+# ----------------------------------------------------------------------------------
+# Time-stamped force history: no solve.
+
+
+class ForceSample(AbstractSample):
+    """A force sample: `time` (s), `force` (N), `mask` (False: padding)."""
+
+    time: Float[Array, "*samples"]
+    force: Float[Array, "*samples"]
+    mask: Bool[Array, "*samples"]
+
+
+def force_step(
+    model: AbstractCableModel, cable: Cable, state: CableState, sample: ForceSample
+) -> tuple[CableState, StrainParts]:
+    """Advance one cable by one force sample, the force linear since the last one
+    (the step of [`jaxcable.step`][] and of `ForceDrive`)."""
+    dt = sample.time - state.time
+    branch = direction(sample.force - state.force)
+    model_state, parts = model.advance(
+        state.model_state, cable, dt, sample.force, branch
+    )
+    result = sample_result(dt=dt, force=sample.force)
+    return commit(
+        state, model_state, parts, sample.time, sample.force, result, sample.mask
+    )
+
+
+class ForceDrive(AbstractDrive):
+    """A time-stamped force history, from the unloaded cable at its first time."""
+
+    samples: ForceSample
+
+    def init(self, model, cable):
+        return init_state(model, cable, self.samples.time[0]), self.samples
+
+    def step(self, model, cable, state, sample):
+        return force_step(model, cable, state, sample)
+
+
+# ----------------------------------------------------------------------------------
+# Rate-driven test: the time of each force sample is solved.
+
+
+class RateSample(AbstractSample):
+    """A sample of a [`jaxcable.Protocol`][], with `continues`: whether the sample
+    goes on the ramp of the previous one (from the protocol, not from the state)."""
+
+    force: Float[Array, "*samples"]
+    direction: Int[Array, "*samples"]
+    duration: Float[Array, "*samples"]
+    mask: Bool[Array, "*samples"]
+    continues: Bool[Array, "*samples"]
+
+
+class _TimeProblem(eqx.Module):
+    model: AbstractCableModel
+    cable: Cable
+    state: CableState
+    force: Float[Array, ""]
+    direction: Int[Array, ""]
+    duration: Float[Array, ""]
+    # Strain scale of the relative residual, independent of dt (see _time_residual).
+    scale: Float[Array, ""]
+
+
+def _time_residual(dt, problem: _TimeProblem):
+    """Park Eq. 5 = Eq. 6 along one ramp: (model strain - crosshead strain), relative.
+
+    The relative scale is fixed per sample (`_TimeProblem.scale`), not a function of
+    `dt`: a `dt`-dependent scale such as |eps_kin(dt)| adds a term
+    -(residual) d scale / d dt to the slope, which on an unloading ramp with a strong
+    short-term recovery flips the slope's sign far from the root, and the solver then
+    takes the iterate for one beyond a turning point.
+
+    On a hold the residual is (dt - duration) / (duration + 1 s): solved in one step.
+    """
+    s = problem.state
+    rate = problem.cable.strain_rate
+    _, parts = problem.model.advance(
+        s.model_state, problem.cable, dt, problem.force, problem.direction
+    )
+    ramp = problem.direction != 0
+    sign = jnp.where(ramp, problem.direction, 1)
+    kinematic = s.strain + sign * rate * dt
+    hold = (dt - problem.duration) / (problem.duration + 1.0)
+    return jnp.where(ramp, (parts.total - kinematic) / problem.scale, hold)
+
+
+class RateDrive(AbstractDrive):
+    """A rate-driven test: the crosshead moves at `cable.speed` along each ramp, so
+    the strain follows eps_kin(t) = eps_start +/- (v / L0) (t - t_start) (Park Eq. 6),
+    and the time of each force sample is the root of model strain minus eps_kin
+    (Park Eq. 5 = Eq. 6). Starts from the unloaded cable at t = 0."""
+
+    protocol: Protocol
+    solver: Newton | optx.AbstractRootFinder
+
+    def init(self, model, cable):
+        state = init_state(model, cable)
+        dtype = state.strain.dtype
+        protocol = self.protocol
+        branch = jnp.asarray(protocol.direction, jnp.int32)
+        previous = jnp.concatenate([jnp.zeros_like(branch[:1]), branch[:-1]])
+        samples = RateSample(
+            force=jnp.asarray(protocol.force, dtype),
+            direction=branch,
+            duration=jnp.asarray(protocol.duration, dtype),
+            mask=jnp.asarray(protocol.mask, bool),
+            continues=(branch != 0) & (branch == previous),
+        )
+        return state, samples
+
+    def step(self, model, cable, state, sample: RateSample):
+        force, branch, duration = sample.force, sample.direction, sample.duration
+
+        # Initial guess. Inside a ramp, the previous step's duration (samples are
+        # close and creep is smooth, so two Newton steps suffice). At the start of a
+        # ramp, the time the instantaneous strain step alone takes at speed v. On a
+        # hold, its duration. `continues` comes from the protocol, so when one
+        # protocol is shared by a vmapped batch the cond stays a branch and the
+        # first-sample guess costs nothing on the other samples.
+        def first_guess():
+            zero = jnp.zeros_like(duration)
+            _, parts0 = model.advance(state.model_state, cable, zero, force, branch)
+            jump = jnp.abs(parts0.total - state.strain) / cable.strain_rate
+            return jnp.where(branch != 0, jump, duration)
+
+        guess = jax.lax.cond(sample.continues, lambda: state.last_step, first_guess)
+        # Along a loading ramp the crosshead overtakes the model strain (slope < 0 at
+        # the root); along an unloading ramp the other way round; a hold is linear in
+        # dt.
+        slope_sign = jnp.where(branch != 0, -branch, 1).astype(guess.dtype)
+        # The residual's scale: the strains at the start of the step and at the
+        # guessed end (the crosshead's, where the guess puts it), which bracket the
+        # strain of the solution to first order; fixed for the solve so that it
+        # cannot bend the slope.
+        sign = jnp.where(branch != 0, branch, 1).astype(guess.dtype)
+        target = state.strain + sign * cable.strain_rate * guess
+        scale = jnp.abs(state.strain) + jnp.abs(target) + _STRAIN_FLOOR
+        problem = _TimeProblem(model, cable, state, force, branch, duration, scale)
+        dt, converged = root_scalar(
+            _time_residual,
+            self.solver,
+            guess,
+            problem,
+            jnp.zeros_like(guess),
+            slope_sign=slope_sign,
+            growth=1e-6 / cable.strain_rate,
+        )
+        dt = checkpoint_name(dt, SOLUTION)
+        result = sample_result(converged=converged, dt=dt)
+        model_state, parts = model.advance(state.model_state, cable, dt, force, branch)
+        return commit(
+            state, model_state, parts, state.time + dt, force, result, sample.mask
+        )
+
+
+# ----------------------------------------------------------------------------------
+# Time-stamped elongation history: the force is solved.
+
+
+class ElongationSample(AbstractSample):
+    """An elongation sample: `time` (s), `elongation` (m), `mask` (False: padding)."""
+
+    time: Float[Array, "*samples"]
+    elongation: Float[Array, "*samples"]
+    mask: Bool[Array, "*samples"]
+
+
+class _ForceProblem(eqx.Module):
+    model: AbstractCableModel
+    cable: Cable
+    state: CableState
+    dt: Float[Array, ""]
+    target: Float[Array, ""]
+    direction: Int[Array, ""]
+
+
+def _force_residual(force, problem: _ForceProblem):
+    s = problem.state
+    _, parts = problem.model.advance(
+        s.model_state, problem.cable, problem.dt, force, problem.direction
+    )
+    return (parts.total - problem.target) / (jnp.abs(problem.target) + _STRAIN_FLOOR)
+
+
+class ElongationDrive(AbstractDrive):
+    """A time-stamped elongation history, from the unloaded cable at its first time.
+
+    The branch follows the sign of the imposed elongation change; below the cable's
+    zero-force length the cable is slack (0 N)."""
+
+    samples: ElongationSample
+    solver: Newton | optx.AbstractRootFinder
+
+    def init(self, model, cable):
+        return init_state(model, cable, self.samples.time[0]), self.samples
+
+    def step(self, model, cable, state, sample: ElongationSample):
+        target = sample.elongation / cable.length
+        dt = sample.time - state.time
+        branch = direction(target - state.strain)
+        problem = _ForceProblem(model, cable, state, dt, target, branch)
+        # Slack: an imposed length below the zero-force length leaves the cable
+        # unloaded.
+        zero = jnp.zeros_like(target)
+        slack = _force_residual(zero, problem) >= 0
+        # Initial guess from the local compliance at the previous force (Newton's
+        # first step taken by hand with a floor, since the hardening law has zero
+        # slope at 0 N).
+        f_prev = jnp.maximum(state.force, 1e-3 * cable.breaking_load)
+        r_prev, compliance = jax.jvp(
+            lambda f: _force_residual(f, problem), (f_prev,), (jnp.ones_like(f_prev),)
+        )
+        guess = jnp.clip(
+            f_prev - r_prev / compliance,
+            1e-6 * cable.breaking_load,
+            cable.breaking_load,
+        )
+        # Strain rises with force; a flat slope (0 N under hardening) grows the force.
+        solved, converged = root_scalar(
+            _force_residual,
+            self.solver,
+            guess,
+            problem,
+            zero,
+            slope_sign=jnp.ones_like(guess),
+            growth=1e-6 * cable.breaking_load,
+        )
+        force = checkpoint_name(jnp.where(slack, zero, solved), SOLUTION)
+        result = sample_result(converged=slack | converged, force=force)
+        model_state, parts = model.advance(state.model_state, cable, dt, force, branch)
+        return commit(
+            state, model_state, parts, sample.time, force, result, sample.mask
+        )

@@ -1,0 +1,177 @@
+"""The state of one simulated cable and what every drive does with it at each sample:
+[`jaxcable.CableState`][], [`jaxcable.init_state`][], the commit of a sample (the
+first failure kept, padding samples skipped) and the [`jaxcable.Trajectory`][] that a
+simulation returns."""
+
+import equinox as eqx
+import jax.numpy as jnp
+import jax.tree_util as jtu
+from jaxtyping import Array, ArrayLike, Bool, Float, Int, PyTree
+
+from .._cable import Cable
+from .._models import AbstractCableModel, StrainParts
+from .._results import RESULTS
+
+
+class Trajectory(eqx.Module):
+    """A simulated strain history (one cable; a leading batch axis when vmapped).
+
+    **Fields:**
+
+    - `time`: time of each sample, s.
+    - `force`: cable force, N.
+    - `strain`: total strain (elongation / L0), dimensionless.
+    - `elongation`: elongation, m.
+    - `parts`: the strain split into instantaneous, creep and short- and long-term
+        recovery ([`jaxcable.StrainParts`][]).
+    - `mask`: False at padding samples (their values repeat the last valid sample).
+    - `result`: a [`jaxcable.RESULTS`][]: `successful`, or the first failure.
+    """
+
+    time: Float[Array, "*batch samples"]
+    force: Float[Array, "*batch samples"]
+    strain: Float[Array, "*batch samples"]
+    elongation: Float[Array, "*batch samples"]
+    parts: StrainParts
+    mask: Bool[Array, "*batch samples"]
+    result: RESULTS
+
+    @property
+    def instantaneous(self):
+        return self.parts.instantaneous
+
+    @property
+    def creep(self):
+        return self.parts.creep
+
+    @property
+    def recovery_short(self):
+        return self.parts.recovery_short
+
+    @property
+    def recovery_long(self):
+        return self.parts.recovery_long
+
+
+class CableState(eqx.Module):
+    """The driver-level state of one simulated cable: a model's state plus the last
+    sample's time (s), force (N) and strain, the duration of the last step (s) and
+    the first failure so far.
+
+    This is the carry of every simulation's `lax.scan`, and what [`jaxcable.step`][]
+    takes and returns inside a user's own scan or controller.
+    """
+
+    model_state: PyTree
+    time: Float[Array, ""]
+    force: Float[Array, ""]
+    strain: Float[Array, ""]
+    last_step: Float[Array, ""]
+    result: RESULTS
+
+
+def init_state(
+    model: AbstractCableModel, cable: Cable, time: ArrayLike = 0.0
+) -> CableState:
+    """The state of a new, unloaded cable at `time` (s).
+
+    **Arguments:**
+
+    - `model`: any [`jaxcable.AbstractCableModel`][].
+    - `cable`: the [`jaxcable.Cable`][].
+    - `time`: the time of the initial state, s.
+
+    **Returns:**
+
+    A [`jaxcable.CableState`][].
+    """
+    model_state = model.init(cable)
+    dtype = jnp.result_type(float, cable.length)
+    zero = jnp.zeros((), dtype)
+    return CableState(
+        model_state=model_state,
+        time=jnp.asarray(time, dtype),
+        force=zero,
+        strain=zero,
+        last_step=zero,
+        result=model.check(cable),
+    )
+
+
+def direction(delta: Float[Array, ""]) -> Int[Array, ""]:
+    """The branch a change `delta` of the force (or strain) asks of the model: +1, -1,
+    or 0 for no change."""
+    # No threshold: a threshold is a discontinuity in the force history.
+    return jnp.where(delta > 0, 1, jnp.where(delta < 0, -1, 0)).astype(jnp.int32)
+
+
+def sample_result(
+    *,
+    converged: Bool[Array, ""] | None = None,
+    dt: Float[Array, ""] | None = None,
+    force: Float[Array, ""] | None = None,
+) -> RESULTS:
+    """The result of one sample: `newton_failed` unless its solve `converged`, then
+    `nonphysical_time` unless `dt` is finite and >= 0, then `nonphysical_force` unless
+    `force` is finite and >= 0 (the later check's failure wins); each check only
+    where its argument is given."""
+    result = RESULTS.successful
+    if converged is not None:
+        result = RESULTS.where(converged, RESULTS.successful, RESULTS.newton_failed)
+    if dt is not None:
+        ok = (dt >= 0) & jnp.isfinite(dt)
+        result = RESULTS.where(ok, result, RESULTS.nonphysical_time)
+    if force is not None:
+        ok = (force >= 0) & jnp.isfinite(force)
+        result = RESULTS.where(ok, result, RESULTS.nonphysical_force)
+    return result
+
+
+def _select(pred, new, old):
+    return jtu.tree_map(lambda a, b: jnp.where(pred, a, b), new, old)
+
+
+def commit(
+    state: CableState,
+    model_state: PyTree,
+    parts: StrainParts,
+    time: Float[Array, ""],
+    force: Float[Array, ""],
+    result: RESULTS,
+    mask: Bool[Array, ""],
+) -> tuple[CableState, StrainParts]:
+    """The state after one sample, from the model's new state and strain.
+
+    **Arguments:**
+
+    - `state`: the [`jaxcable.CableState`][] before the sample.
+    - `model_state`, `parts`: the model's state and strain after the sample.
+    - `time`, `force`: the sample's time (s) and force (N).
+    - `result`: the sample's own result (`sample_result`).
+    - `mask`: False for a padding sample, which leaves the state unchanged.
+
+    **Returns:**
+
+    `(new_state, parts)`. The state keeps the first failure so far; a padding
+    sample returns the old state and the old strain.
+    """
+    strain = parts.total
+    # A non-finite strain is reported only when the step had no cause of its own (a
+    # time going backwards, a negative force), which is the more useful message.
+    result = RESULTS.where(
+        jnp.isfinite(strain) | (result != RESULTS.successful),
+        result,
+        RESULTS.nonphysical_strain,
+    )
+    new = CableState(
+        model_state=model_state,
+        time=time,
+        force=force,
+        strain=strain,
+        last_step=time - state.time,
+        result=RESULTS.where(state.result == RESULTS.successful, result, state.result),
+    )
+    # Padding samples repeat the last strain; its split is not needed bit-exact.
+    z = jnp.zeros_like(parts.instantaneous)
+    old_parts = StrainParts(state.strain, z, z, z)
+    return _select(mask, new, state), _select(mask, parts, old_parts)
