@@ -7,26 +7,22 @@ from ._diagnose import (
     diagnose as diagnose,
     residual_structure as residual_structure,
 )
-from ._drive.analysis import (
-    loop_energies as loop_energies,
-    secant_stiffness as secant_stiffness,
-    split_cycles as split_cycles,
-)
-from ._drive.controller import (
+from ._drive import (
+    CableState as CableState,
     ControllerState as ControllerState,
     LiveFiveElement as LiveFiveElement,
+    Newton as Newton,
+    Protocol as Protocol,
+    Trajectory as Trajectory,
     controller_init as controller_init,
     controller_step as controller_step,
-)
-from ._drive.newton import Newton as Newton
-from ._drive.protocol import Protocol as Protocol
-from ._drive.simulate import (
-    CableState as CableState,
-    Trajectory as Trajectory,
     init_state as init_state,
+    loop_energies as loop_energies,
+    secant_stiffness as secant_stiffness,
     simulate_elongation_history as simulate_elongation_history,
     simulate_force_history as simulate_force_history,
     simulate_rate_test as simulate_rate_test,
+    split_cycles as split_cycles,
     step as step,
 )
 from ._fit import (

@@ -19,13 +19,13 @@ from jaxtyping import Array, ArrayLike, Float, Int
 from .. import _checks
 from .._cable import Cable
 from .._models import (
-    PIAO_TABLE1,
     PIAO_TABLE3,
     AbstractCableModel,
     FiveElementModel,
     FiveElementState,
     ParameterSurface,
     StrainParts,
+    table1_field,
 )
 from .._results import RESULTS
 from .simulate import step
@@ -66,18 +66,10 @@ class LiveFiveElement(AbstractCableModel[FiveElementState]):
 
     surface: ParameterSurface = PIAO_TABLE3
     gravity: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=GRAVITY)
-    E_L2: Float[Array, ""] = eqx.field(
-        converter=jnp.asarray, default=PIAO_TABLE1["E_L2"]
-    )
-    E_L3: Float[Array, ""] = eqx.field(
-        converter=jnp.asarray, default=PIAO_TABLE1["E_L3"]
-    )
-    eta_L2: Float[Array, ""] = eqx.field(
-        converter=jnp.asarray, default=PIAO_TABLE1["eta_L2"]
-    )
-    eta_L3: Float[Array, ""] = eqx.field(
-        converter=jnp.asarray, default=PIAO_TABLE1["eta_L3"]
-    )
+    E_L2: Float[Array, ""] = table1_field("E_L2")
+    E_L3: Float[Array, ""] = table1_field("E_L3")
+    eta_L2: Float[Array, ""] = table1_field("eta_L2")
+    eta_L3: Float[Array, ""] = table1_field("eta_L3")
 
     def __check_init__(self):
         for name in ("gravity", "E_L2", "E_L3", "eta_L2", "eta_L3"):

@@ -2,7 +2,7 @@
 
 - `ForceDrive`: a time-stamped force history (a robot's log): no solve;
 - `RateDrive`: a rate-driven test (a tensile tester): the time at which each force
-    sample is reached is solved by Newton's method (Park Eq. 5-6);
+    sample is reached is solved by Newton's method (Park Eq. 6);
 - `ElongationDrive`: a time-stamped elongation history (displacement control):
     the force of each sample is solved by Newton's method.
 """
@@ -101,7 +101,7 @@ class _TimeProblem(eqx.Module):
 
 
 def _time_residual(dt, problem: _TimeProblem):
-    """Park Eq. 5 = Eq. 6 along one ramp: (model strain - crosshead strain), relative.
+    """Park Eq. 6 along one ramp: (model strain - crosshead strain), relative.
 
     The relative scale is fixed per sample (`_TimeProblem.scale`), not a function of
     `dt`: a `dt`-dependent scale such as |eps_kin(dt)| adds a term
@@ -127,7 +127,7 @@ class RateDrive(AbstractDrive):
     """A rate-driven test: the crosshead moves at `cable.speed` along each ramp, so
     the strain follows eps_kin(t) = eps_start +/- (v / L0) (t - t_start) (Park Eq. 6),
     and the time of each force sample is the root of model strain minus eps_kin
-    (Park Eq. 5 = Eq. 6). Starts from the unloaded cable at t = 0."""
+    (Park Eq. 6). Starts from the unloaded cable at t = 0."""
 
     protocol: Protocol
     solver: Newton | optx.AbstractRootFinder

@@ -16,7 +16,7 @@ class Newton(eqx.Module):
     """Newton–Raphson for the scalar root of each sample, built for the scan.
 
     The per-sample problems of jaxcable (the loading time of a force sample, Park
-    Eq. 5-6; the force of an imposed elongation) are scalar and smooth, and a good
+    Eq. 6; the force of an imposed elongation) are scalar and smooth, and a good
     initial guess is known (along a ramp, the previous sample's duration), so Newton
     converges in one or two steps. This solver takes `unrolled` steps without a loop,
     then continues in a `lax.while_loop` only while some sample is unconverged, up to

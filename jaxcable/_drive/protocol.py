@@ -14,7 +14,7 @@ class Protocol(eqx.Module):
 
     On a ramp (`direction` +1 or -1) the crosshead moves at the cable's constant
     `speed`, and the time at which each force sample is reached is unknown: it is
-    solved per sample by Newton's method inside the scan (Park Eq. 5-6). On a hold
+    solved per sample by Newton's method inside the scan (Park Eq. 6). On a hold
     (`direction` 0) the force is held for a given `duration`.
     Build protocols with the constructors below and join them with
     [`jaxcable.Protocol.concatenate`][]; pad with [`jaxcable.Protocol.pad`][] to vmap

@@ -26,8 +26,6 @@ from .protocol import Protocol
 from .state import (
     CableState,
     Trajectory,
-    # Re-exported: the package's root imports it from this module.
-    init_state as init_state,
 )
 
 
@@ -120,7 +118,7 @@ def simulate_rate_test(
     The crosshead moves at `cable.speed`, so along each ramp the strain follows
     eps_kin(t) = eps_start +/- (v / L0) (t - t_start) (Park Eq. 6). The time t_i at
     which each force sample is reached is the root of model strain minus eps_kin
-    (Park Eq. 5 = Eq. 6), found per sample by Newton's method (optimistix) inside the
+    (Park Eq. 6), found per sample by Newton's method (optimistix) inside the
     scan, vectorised under `vmap` and differentiated by the implicit function theorem.
 
     **Arguments:**

@@ -42,6 +42,7 @@ from .piao import (
     PIAO_TABLE1 as PIAO_TABLE1,
     FiveElementModel as FiveElementModel,
     FiveElementState as FiveElementState,
+    table1_field as table1_field,
 )
 from .piao_surface import (
     PIAO_TABLE3 as PIAO_TABLE3,

@@ -36,6 +36,11 @@ PIAO_TABLE1: dict[str, float] = dict(
 eta_UL2, eta_UL3) set equal to them: the unloading table (Table 2) is lost."""
 
 
+def table1_field(name: str):
+    """A model field (Pa or Pa s) whose default is Piao's Table 1 value `name`."""
+    return eqx.field(converter=jnp.asarray, default=PIAO_TABLE1[name])
+
+
 class FiveElementState(eqx.Module):
     """Scan carry of [`jaxcable.FiveElementModel`][] for one cable (all SI).
 
@@ -250,31 +255,15 @@ class FiveElementModel(AbstractCableModel[FiveElementState]):
     """
 
     E_L1: Float[Array, "*batch"] = eqx.field(converter=jnp.asarray, default=2.2e14)
-    E_L2: Float[Array, "*batch"] = eqx.field(
-        converter=jnp.asarray, default=PIAO_TABLE1["E_L2"]
-    )
-    E_L3: Float[Array, "*batch"] = eqx.field(
-        converter=jnp.asarray, default=PIAO_TABLE1["E_L3"]
-    )
-    eta_L2: Float[Array, "*batch"] = eqx.field(
-        converter=jnp.asarray, default=PIAO_TABLE1["eta_L2"]
-    )
-    eta_L3: Float[Array, "*batch"] = eqx.field(
-        converter=jnp.asarray, default=PIAO_TABLE1["eta_L3"]
-    )
+    E_L2: Float[Array, "*batch"] = table1_field("E_L2")
+    E_L3: Float[Array, "*batch"] = table1_field("E_L3")
+    eta_L2: Float[Array, "*batch"] = table1_field("eta_L2")
+    eta_L3: Float[Array, "*batch"] = table1_field("eta_L3")
     E_UL1: Float[Array, "*batch"] = eqx.field(converter=jnp.asarray, default=2.2e14)
-    E_UL2: Float[Array, "*batch"] = eqx.field(
-        converter=jnp.asarray, default=PIAO_TABLE1["E_UL2"]
-    )
-    E_UL3: Float[Array, "*batch"] = eqx.field(
-        converter=jnp.asarray, default=PIAO_TABLE1["E_UL3"]
-    )
-    eta_UL2: Float[Array, "*batch"] = eqx.field(
-        converter=jnp.asarray, default=PIAO_TABLE1["eta_UL2"]
-    )
-    eta_UL3: Float[Array, "*batch"] = eqx.field(
-        converter=jnp.asarray, default=PIAO_TABLE1["eta_UL3"]
-    )
+    E_UL2: Float[Array, "*batch"] = table1_field("E_UL2")
+    E_UL3: Float[Array, "*batch"] = table1_field("E_UL3")
+    eta_UL2: Float[Array, "*batch"] = table1_field("eta_UL2")
+    eta_UL3: Float[Array, "*batch"] = table1_field("eta_UL3")
 
     def __check_init__(self):
         _checks.check_parameters("FiveElementModel", self, _FIVE_ELEMENT_FIELDS)
