@@ -1,7 +1,7 @@
 """The hidden-effect confusion matrix and detection limits of `jaxcable.diagnose`.
 
 For each hidden effect (and for none), `--seeds` data sets of
-`jaxcable.hidden_effect_dataset` (six tests: three lengths, two rates, three force
+`jaxcable.papers.hidden_effect_dataset` (six tests: three lengths, two rates, three force
 levels, three temperatures; 5 um elongation and 0.05 N force noise; the base
 parameters perturbed by 10 % per seed) are diagnosed at the effect's documented size;
 the named causes make the confusion matrix. With `--sweep`, each effect is also run at
@@ -27,6 +27,7 @@ import numpy as np
 jax.config.update("jax_enable_x64", True)
 
 import jaxcable as jc
+from jaxcable import papers
 from jaxcable._diagnose import heldout_rmse
 from jaxcable._papers.synthetic import (
     HIDDEN_EFFECT_DESIGN,
@@ -40,7 +41,7 @@ def effect_magnitude(effect, seed, size):
     elongation, um: the true model minus its base, noise-free."""
     if effect is None:
         return 0.0, 0.0
-    true = jc.hidden_effect_model(effect, seed=seed, size=size)
+    true = papers.hidden_effect_model(effect, seed=seed, size=size)
     diffs = []
     for length, rate, force, temp in HIDDEN_EFFECT_DESIGN:
         cable = jc.Cable(
@@ -55,8 +56,10 @@ def effect_magnitude(effect, seed, size):
 
 
 def run(effect, seed, size):
-    tests = jc.hidden_effect_dataset(effect, seed=seed, size=size)
-    floor = heldout_rmse(jc.hidden_effect_model(effect, seed=seed, size=size), tests)
+    tests = papers.hidden_effect_dataset(effect, seed=seed, size=size)
+    floor = heldout_rmse(
+        papers.hidden_effect_model(effect, seed=seed, size=size), tests
+    )
     rms_um, max_um = effect_magnitude(effect, seed, size)
     d = jc.diagnose(tests)
     return {

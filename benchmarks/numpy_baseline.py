@@ -11,7 +11,7 @@ prints one JSON object and a table: NumPy time, the kernel's time on the same pr
 relative difference.
 
 It is the same model as `jaxcable.IntegratedModel.advance` (Park Eq. 1-9 with the
-readings of MODEL_NOTES) and the same time solve as `jaxcable.simulate_rate_test`
+readings of docs/model_notes.md) and the same time solve as `jaxcable.simulate_rate_test`
 (Park Eq. 5 = Eq. 6 per force sample, relative strain residual, Newton with an
 analytic derivative): a Python loop over the samples, vectorised over the batch of
 cables, Newton iterations in NumPy until every cable of the batch has converged.

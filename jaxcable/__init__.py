@@ -89,14 +89,6 @@ from ._montecarlo import (
     Uniform as Uniform,
     monte_carlo as monte_carlo,
 )
-from ._papers import (
-    SK78_TARGETS as SK78_TARGETS,
-    calibrate_sk78 as calibrate_sk78,
-    hidden_effect_dataset as hidden_effect_dataset,
-    hidden_effect_model as hidden_effect_model,
-    sk78_qualitative_checks as sk78_qualitative_checks,
-    sk78_targets_report as sk78_targets_report,
-)
 from ._report import write_diagnosis_report as write_diagnosis_report
 from ._results import RESULTS as RESULTS
 

@@ -45,7 +45,7 @@ def test_burgers_constant_load_matches_park_eq3():
 
 
 def test_burgers_ramp_is_exact():
-    """F = k t: the exact hereditary integral (MODEL_NOTES point 4), on a coarse grid."""
+    """F = k t: the exact hereditary integral (docs/model_notes.md, point 4), on a coarse grid."""
     model = jaxcable.BurgersModel(E1=2.2e9, eta0=1.6e11, E2=3.7e8, eta2=3.7e10)
     k = 0.5  # N/s
     time = np.array([0.0, 1.0, 5.0, 20.0, 50.0, 80.0, 100.0, 150.0, 200.0, 300.0])

@@ -228,7 +228,7 @@ def test_temperature_reduced_time_and_hotter_creeps_faster():
 
 
 def test_hereditary_ramp_matches_exact_superposition():
-    # MODEL_NOTES point 4: under F = F0 + k t (F0 applied at t = 0) the Kelvin-Voigt
+    # docs/model_notes.md, point 4: under F = F0 + k t (F0 applied at t = 0) the Kelvin-Voigt
     # term is exactly [F0 (1 - e) + k (t - t_c (1 - e))] / (E2c A), e = exp(-t / t_c),
     # when w = 1. F0 = 1 N is above the 0.2 N where the tension clock ramps in
     # (`jaxcable._models.kernels.tension_time_step`), so the clock is the real time (from 0 N a

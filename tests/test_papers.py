@@ -1,5 +1,5 @@
 """The default IntegratedModel against Park et al.'s printed numbers (the set was
-fitted to them by `jaxcable.calibrate_sk78`, see notebooks/01_papers.ipynb)."""
+fitted to them by `jaxcable.papers.calibrate_sk78`, see notebooks/01_papers.ipynb)."""
 
 import json
 import subprocess
@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 import jaxcable as jc
+from jaxcable import papers
 from jaxcable._papers import calibration, park
 
 
@@ -35,13 +36,13 @@ MISSED = set()
 
 @pytest.fixture(scope="module")
 def report():
-    return {row.name: row for row in jc.sk78_targets_report()}
+    return {row.name: row for row in papers.sk78_targets_report()}
 
 
 def test_targets_are_sourced():
-    names = [t.name for t in jc.SK78_TARGETS]
+    names = [t.name for t in papers.SK78_TARGETS]
     assert len(set(names)) == len(names) == 11
-    for target in jc.SK78_TARGETS:
+    for target in papers.SK78_TARGETS:
         assert "Park" in target.source
         assert target.derived == target.name.startswith("peak_")
 
@@ -62,7 +63,7 @@ def test_errors_as_recorded(report):
 def test_cyclic_behaviour():
     # Park Figs. 4-7 and Tables 4-5: stiffness rises then converges, the dissipated
     # energy per cycle falls, the cable ends each cycle longer.
-    checks = jc.sk78_qualitative_checks()
+    checks = papers.sk78_qualitative_checks()
     for force, c in checks.items():
         assert c["stiffness_rises"], (force, c["stiffness"])
         assert c["stiffness_converges"], (force, c["stiffness"])
@@ -132,7 +133,7 @@ def test_rate_effect():
 def test_failed_simulation_reported_as_nan():
     # t_r2 < 0 at 50 mm/min (Park Eq. 8): only that target is lost.
     model = eqx.tree_at(lambda m: m.lambda2, jc.IntegratedModel(), 1e3)
-    rows = {r.name: r for r in jc.sk78_targets_report(model, samples_per_ramp=20)}
+    rows = {r.name: r for r in papers.sk78_targets_report(model, samples_per_ramp=20)}
     assert np.isnan(rows["peak_300mm_50mm_min"].model)
     assert all(
         np.isfinite(r.model)
@@ -178,10 +179,11 @@ _CALIBRATE = """
 import json, jax
 jax.config.update("jax_enable_x64", True)
 import numpy as np, jaxcable as jc
-cal = jc.calibrate_sk78(jc.IntegratedModel(), starts=1, max_steps=3, samples_per_ramp=20)
+from jaxcable import papers
+cal = papers.calibrate_sk78(jc.IntegratedModel(), starts=1, max_steps=3, samples_per_ramp=20)
 print(json.dumps(dict(
     model=isinstance(cal.model, jc.IntegratedModel), rows=len(cal.rows),
-    targets=len(jc.SK78_TARGETS), costs=[float(c) for c in cal.costs],
+    targets=len(papers.SK78_TARGETS), costs=[float(c) for c in cal.costs],
     steps=[int(k) for k in cal.steps])))
 """
 

@@ -305,7 +305,7 @@ class IntegratedModel(AbstractCableModel[IntegratedState]):
     exact superposition); this is the paper's model, kept as printed.
 
     The default parameters are a Dyneema SK78 3 mm set fitted to the numbers Park
-    prints (Table 1 of the fitted parameters is lost): [`jaxcable.calibrate_sk78`][]
+    prints (Table 1 of the fitted parameters is lost): [`jaxcable.papers.calibrate_sk78`][]
     (Levenberg-Marquardt on the errors, in %, of the creep ratio, the residual
     elongations and Table 3; all < 5 %), rounded to 4 digits; see
     `notebooks/01_papers.ipynb`.

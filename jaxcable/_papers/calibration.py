@@ -267,12 +267,12 @@ def _residuals(u, args: _FitArgs):
 
 
 class Calibration(NamedTuple):
-    """The result of [`jaxcable.calibrate_sk78`][].
+    """The result of [`jaxcable.papers.calibrate_sk78`][].
 
     **Fields:**
 
     - `model`: the fitted [`jaxcable.IntegratedModel`][] (the start of least cost).
-    - `rows`: [`jaxcable.sk78_targets_report`][] of `model`.
+    - `rows`: [`jaxcable.papers.sk78_targets_report`][] of `model`.
     - `costs`: the final cost of every start.
     - `errors`: the largest |error| (%) over the targets, of every start.
     - `steps`: the Levenberg-Marquardt steps of every start.
@@ -323,7 +323,7 @@ def calibrate_sk78(
 ) -> Calibration:
     """Fit the 12 parameters of [`jaxcable.IntegratedModel`][] to Park's SK78 numbers.
 
-    Minimises the errors (%) of [`jaxcable.sk78_targets_report`][], every target
+    Minimises the errors (%) of [`jaxcable.papers.sk78_targets_report`][], every target
     weighing the same in %; errors above `soft_limit` are penalised steeply, so the
     fit approaches the smallest largest error. Park's qualitative cyclic behaviour
     (10 cycles at 100 and 150 N: stiffness rises, loop energy positive and falling,

@@ -166,7 +166,7 @@ SK78_TARGETS: tuple[Target, ...] = (
 
 
 class TargetRow(NamedTuple):
-    """One row of [`jaxcable.sk78_targets_report`][].
+    """One row of [`jaxcable.papers.sk78_targets_report`][].
 
     **Fields:**
 
