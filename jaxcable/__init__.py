@@ -1,6 +1,10 @@
 import importlib.metadata
 
 from ._cable import Cable as Cable
+from ._cache import (
+    clear_compilation_cache as clear_compilation_cache,
+    enable_compilation_cache as enable_compilation_cache,
+)
 from ._diagnose import (
     Candidate as Candidate,
     Diagnosis as Diagnosis,

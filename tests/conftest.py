@@ -1,8 +1,14 @@
 import os
 import pathlib
 
-import jax
-import pytest
+
+# The command line keeps compiled programs in a per-user cache; the suite runs the
+# command line in-process, where that would change jax.config for every later test.
+# tests/test_cache.py checks the cache itself, in fresh interpreters.
+os.environ["JAXCABLE_NO_CACHE"] = "1"
+
+import jax  # noqa: E402
+import pytest  # noqa: E402
 
 
 jax.config.update("jax_enable_x64", True)

@@ -10,6 +10,7 @@ from collections.abc import Sequence
 
 import jax
 
+from .._cache import enable_compilation_cache
 from .common import PROG, CliError, one_line
 from .parser import build_parser
 
@@ -28,6 +29,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     """
     try:
         args = build_parser().parse_args(argv)
+        if args.command != "cache":
+            # Compiling is most of a command's time: the next run loads the programs.
+            enable_compilation_cache()
         # The command line writes files, so its precision must not depend on the
         # caller's jax config: float32 Newton solves of rate-driven tests do not
         # converge at the default tolerances. Scoped; jax.config is left as it was.

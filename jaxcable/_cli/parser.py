@@ -7,6 +7,7 @@ import math
 from collections.abc import Callable
 
 from .._models import BY_CLI_NAME, DEFAULT_CLI_MODEL, PARK_IDENTIFIABLE
+from .cache import cache_command
 from .common import PROG, CliError
 from .demo import demo_command
 from .diagnose import diagnose_command
@@ -385,4 +386,20 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _add_solver_options(demo, starts=2)
     demo.set_defaults(run=demo_command)
+
+    cache = commands.add_parser(
+        "cache",
+        help="show or clear the compilation cache",
+        description=(
+            "Every command keeps the XLA programs it compiles on disk, so that the "
+            "next run with the same shapes starts in a fraction of the time. The "
+            "cache is per user (JAXCABLE_CACHE_DIR, else $XDG_CACHE_HOME/jaxcable/jax, "
+            "else ~/.cache/jaxcable/jax); JAXCABLE_NO_CACHE=1 turns it off. Prints its "
+            "directory and size."
+        ),
+    )
+    cache.add_argument(
+        "--clear", action="store_true", help="delete the cache directory"
+    )
+    cache.set_defaults(run=cache_command)
     return parser
