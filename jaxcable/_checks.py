@@ -181,3 +181,19 @@ def parameters_ok(
 def domain_result(ok: Bool[Array, ""], result: RESULTS = RESULTS.successful) -> RESULTS:
     """`result` where `ok`, else `RESULTS.parameter_out_of_domain` (traced)."""
     return RESULTS.where(ok, result, RESULTS.parameter_out_of_domain)
+
+
+def require_names(argname: str, names, known, owner: str, what: str) -> tuple:
+    """Raise `ValueError` naming `argname` unless `names` are distinct members of
+    `known` (the `what` of `owner`, e.g. "parameters" of "BurgersModel"); return them
+    as a tuple."""
+    names = tuple(names)
+    unknown = [n for n in names if not isinstance(n, str) or n not in known]
+    if unknown:
+        raise ValueError(
+            f"`{argname}` names {unknown}, which are not {what} of {owner}; its "
+            f"{what} are {list(known)}."
+        )
+    if len(set(names)) != len(names):
+        raise ValueError(f"`{argname}` repeats a name: {list(names)}.")
+    return names

@@ -11,6 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, PyTree
 
+from .. import _checks
 from .._cable import Cable
 from .._drive import CableState, init_state, step
 from .._models import AbstractCableModel, ParameterInfo
@@ -203,16 +204,9 @@ def _names(model, available: list[str], arg: str, value) -> tuple[str, ...]:
         return ()
     if isinstance(value, str):
         value = [value]
-    value = tuple(value)
-    unknown = [n for n in value if n not in available]
-    if unknown:
-        raise ValueError(
-            f"`{arg}` names {unknown}, which are not parameters of "
-            f"{type(model).__name__}; its parameters are {available}."
-        )
-    if len(set(value)) != len(value):
-        raise ValueError(f"`{arg}` repeats a name: {list(value)}.")
-    return value
+    return _checks.require_names(
+        arg, value, available, type(model).__name__, "parameters"
+    )
 
 
 def _infos(model, declared: dict, transforms) -> dict[str, ParameterInfo]:

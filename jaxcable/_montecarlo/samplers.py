@@ -35,14 +35,9 @@ def _require_names(argname: str, model, names) -> dict[str, Array]:
     """Raise `ValueError` unless `names` are distinct scalar float parameters of
     `model`; return the model's scalar float fields, by name."""
     fields = _scalar_fields(model)
-    for n in names:
-        if not isinstance(n, str) or n not in fields:
-            raise ValueError(
-                f"`{argname}` names {n!r}, which is not a scalar float parameter of "
-                f"{type(model).__name__}; its parameters are {sorted(fields)}."
-            )
-    if len(set(names)) != len(names):
-        raise ValueError(f"`{argname}` repeats a parameter name: {list(names)}.")
+    _checks.require_names(
+        argname, names, sorted(fields), type(model).__name__, "scalar float parameters"
+    )
     return fields
 
 
