@@ -35,6 +35,15 @@ def atomic_path(path: str | os.PathLike) -> Iterator[pathlib.Path]:
         raise OSError(e.errno, f"cannot write {target}: {e.strerror}", str(target))
     os.close(fd)
     tmp_path = pathlib.Path(tmp)
+    # mkstemp makes the file private (0600); give it the mode a plain open() would
+    # (the old file's, else 0666 less the umask), so the rename changes no permission.
+    try:
+        mode = target.stat().st_mode & 0o777
+    except OSError:
+        umask = os.umask(0)
+        os.umask(umask)
+        mode = 0o666 & ~umask
+    os.chmod(tmp_path, mode)
     try:
         yield tmp_path
         os.replace(tmp_path, target)
