@@ -87,7 +87,7 @@ def diagnose_command(args) -> int:
     if args.report:
         out = pathlib.Path(args.report)
         make_folder(out, "--report")
-        say_replacing([path for _, path in outputs], "--report")
+        say_replacing([path for _, path in outputs], "--report", log)
         with write_errors("--report", out):
             written = write_diagnosis_report(out, diagnosis, tests)
         print(

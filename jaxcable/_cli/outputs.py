@@ -1,15 +1,16 @@
-"""The files a command writes: refused when one of them is one of its inputs, said on
-stderr when one replaces an existing file, and written atomically with an error that
-names the option and the file."""
+"""The files a command writes: refused when one of them is one of its inputs, said in
+the command's log when one replaces an existing file, and written atomically with an
+error that names the option and the file."""
 
 import contextlib
 import os
 import pathlib
 import sys
 from collections.abc import Iterable, Iterator, Sequence
+from typing import TextIO
 
 from .._files import atomic_path
-from .common import PROG, CliError
+from .common import CliError
 
 
 def same_file(a: str | os.PathLike, b: str | os.PathLike) -> bool:
@@ -51,14 +52,18 @@ def refuse_inputs(
                 )
 
 
-def say_replacing(paths: Iterable[str | os.PathLike], option: str) -> None:
-    """One line on stderr naming the files of `paths` that exist (about to be
-    replaced), if any: stdout stays the command's own output."""
+def say_replacing(
+    paths: Iterable[str | os.PathLike], option: str, log: TextIO | None = None
+) -> None:
+    """One line naming the files of `paths` that exist (about to be replaced), if
+    any, on `log` (default stdout): the command's log, beside its "wrote" lines; stderr
+    is kept for the one error line, and `diagnose --json` logs to stderr so that its
+    stdout stays one JSON object."""
     existing = [str(p) for p in paths if os.path.isfile(p)]
     if len(existing) > 5:
         existing = [f"{len(existing)} files ({existing[0]}, ...)"]
     if existing:
-        print(f"{PROG}: replacing {', '.join(existing)} ({option})", file=sys.stderr)
+        print(f"replacing {', '.join(existing)} ({option})", file=log or sys.stdout)
 
 
 @contextlib.contextmanager
