@@ -13,7 +13,7 @@ from .._progress import Progress
 from .._report import DIAGNOSIS_REPORT_FILES, write_diagnosis_report
 from .common import CliError, make_folder, require_folder_of, show_progress
 from .data import data_options, describe_tests, read_tests
-from .fit import input_files, report_files
+from .fit import input_files, named_files, report_files
 from .models import resolve_model
 from .outputs import refuse_inputs, say_replacing, write_errors
 
@@ -45,7 +45,9 @@ def run_diagnosis(
                 **options,
             )
         except ValueError as e:
-            raise CliError(f"cannot diagnose with model '{name}': {e}") from None
+            raise CliError(
+                f"{named_files(tests)}: cannot diagnose with model '{name}': {e}"
+            ) from None
 
 
 def diagnose_command(args) -> int:

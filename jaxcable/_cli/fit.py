@@ -27,8 +27,19 @@ def input_files(args) -> list[tuple[str, str]]:
 
 
 def report_files(folder, names) -> list[tuple[str, pathlib.Path]]:
-    """(option, path) of the files of a `--report` folder."""
+    """(option, path) of the files of a `--report` folder; fails when the folder is
+    an existing file."""
+    if os.path.exists(folder) and not os.path.isdir(folder):
+        raise CliError(f"--report {folder}: is a file, not a folder.")
     return [("--report", pathlib.Path(folder) / name) for name in names]
+
+
+def named_files(tests) -> str:
+    """The files of `tests`, for an error about all of them."""
+    names = [str(t.source) for t in tests if t.source]
+    if len(names) > 3:
+        return f"{names[0]} and {len(names) - 1} other files"
+    return ", ".join(names) or "the data"
 
 
 def run_fit(
@@ -74,7 +85,9 @@ def run_fit(
                 throw=False,
             )
         except ValueError as e:
-            raise CliError(f"cannot fit model '{name}': {e}") from None
+            raise CliError(
+                f"{named_files(tests)}: cannot fit model '{name}': {e}"
+            ) from None
 
 
 def fit_failure(result: FitResult) -> CliError | None:
