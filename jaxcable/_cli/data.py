@@ -1,15 +1,38 @@
 """The measured tests of `jaxcable fit`, `jaxcable diagnose` and `jaxcable demo`: read
 with the data options, thinned, and described in one line per file."""
 
+import csv
 import dataclasses
 import pathlib
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
 from .._io import TestData, read_test
 from .._progress import Progress
 from .common import CliError
+
+
+# The csv module's limit on one cell (its default, 128 KiB): a longer cell is no
+# measurement, and is reported as such.
+_FIELD_LIMIT = csv.field_size_limit()
+
+
+def read_located(read: Callable[..., TestData], path, **options) -> TestData:
+    """`read(path, **options)`, with the errors the readers do not locate (the csv
+    module's, a number too large for a float) reported naming `path`; the readers'
+    own `ValueError`s already name the file, line and column."""
+    try:
+        return read(path, **options)
+    except csv.Error as e:
+        message = str(e)
+        if "field larger than field limit" in message:
+            message = (
+                f"a cell is longer than {_FIELD_LIMIT // 1024} KiB (an unclosed quote?)"
+            )
+        raise CliError(f"{path}: cannot read the file: {message}.") from None
+    except OverflowError as e:
+        raise CliError(f"{path}: a number is too large: {e}.") from None
 
 
 def data_options(args) -> dict:
@@ -67,7 +90,7 @@ def read_tests(
     tests = []
     with Progress("reading", len(paths), enabled=progress) as bar:
         for path in paths:
-            data = read_test(path, **options)
+            data = read_located(read_test, path, **options)
             if data.elongation is None:
                 raise CliError(
                     f"{path}: no elongation column; a fit needs the measured "

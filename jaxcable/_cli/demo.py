@@ -19,13 +19,20 @@ from .._cable import Cable
 from .._drive import Protocol, simulate_rate_test
 from .._io import TestData, write_csv
 from .._models import PARK_IDENTIFIABLE, IntegratedModel
-from .._report import write_diagnosis_report, write_report
+from .._report import (
+    DIAGNOSIS_REPORT_FILES,
+    FIT_REPORT_FILES,
+    save_png,
+    write_diagnosis_report,
+    write_report,
+)
 from .._results import RESULTS
 from .common import CliError, make_folder, one_line, show_progress
 from .data import read_tests
 from .diagnose import run_diagnosis
 from .fit import fit_failure, run_fit
 from .models import names_option, parameter_names
+from .outputs import refuse_inputs, say_replacing, write_errors, writing
 
 
 class _Case(NamedTuple):
@@ -123,7 +130,7 @@ def _plot(path: pathlib.Path, title: str, results: list[_Simulated]) -> None:
         if ax.get_legend_handles_labels()[0]:
             ax.legend()
     fig.suptitle(title)
-    fig.savefig(path, dpi=100)
+    save_png(fig, path, dpi=100)
 
 
 def _bundled_files() -> list:
@@ -183,7 +190,8 @@ def _simulate(args, out: pathlib.Path) -> tuple[list, list[pathlib.Path]]:
             },
         )
         path = out / f"{r.case.name}.csv"
-        write_csv(path, data)
+        with writing("--out", path) as tmp:
+            write_csv(tmp, data)
         written.append(path)
     for group, (filename, title) in _PLOTS.items():
         path = out / filename
@@ -287,7 +295,7 @@ def _fit(args, out: pathlib.Path, files: list, source: str, progress: bool):
         )
     if args.every > 1:
         notes.append(f"1 sample in {args.every} fitted (--every)")
-    params = out / "params.json"
+    params = out / "params.json"  # one of `_outputs`
     result.to_json(params)
     written = write_report(
         out,
@@ -331,22 +339,35 @@ def _diagnose(args, out: pathlib.Path, tests, progress: bool):
     return written
 
 
+def _outputs(out: pathlib.Path, diagnose: bool) -> list[pathlib.Path]:
+    """Every file the demo writes to the folder `out`."""
+    names = [f"{c.name}.csv" for c in _CASES]
+    names += [filename for filename, _ in _PLOTS.values()]
+    names += ["params.json", *FIT_REPORT_FILES]
+    if diagnose:
+        names += [f"diagnosis/{name}" for name in DIAGNOSIS_REPORT_FILES]
+    return [out / name for name in names]
+
+
 def demo_command(args) -> int:
     """Run `jaxcable demo` with the parsed command line `args`; the exit status."""
-    if args.samples_per_ramp < 2:
-        raise CliError(
-            f"--samples-per-ramp must be at least 2, got {args.samples_per_ramp}."
-        )
     progress = show_progress(args)
     # Checked first: no data, no demo (and no half-written output folder).
     files, source = _data(args)
     out = pathlib.Path(args.out)
+    outputs = _outputs(out, diagnose=not args.no_diagnose)
+    refuse_inputs(
+        [("--out", path) for path in outputs],
+        [("--data", f) for f in files if isinstance(f, pathlib.Path)],
+    )
     make_folder(out, "--out")
-    results, written = _simulate(args, out)
-    failure, fit_written, tests = _fit(args, out, files, source, progress)
-    written += fit_written
-    if not args.no_diagnose:
-        written += _diagnose(args, out, tests, progress)
+    say_replacing(outputs, "--out")
+    with write_errors("--out", out):
+        results, written = _simulate(args, out)
+        failure, fit_written, tests = _fit(args, out, files, source, progress)
+        written += fit_written
+        if not args.no_diagnose:
+            written += _diagnose(args, out, tests, progress)
     print()
     print(f"Wrote {len(written)} files to {out}{os.sep}: ", end="")
     print(", ".join(p.name for p in written))

@@ -10,10 +10,12 @@ import jax
 from .._diagnose import diagnose
 from .._models import AbstractCableModel
 from .._progress import Progress
-from .._report import write_diagnosis_report
+from .._report import DIAGNOSIS_REPORT_FILES, write_diagnosis_report
 from .common import CliError, make_folder, require_folder_of, show_progress
 from .data import data_options, describe_tests, read_tests
+from .fit import input_files, named_files, report_files
 from .models import resolve_model
+from .outputs import refuse_inputs, say_replacing, write_errors
 
 
 def run_diagnosis(
@@ -43,7 +45,9 @@ def run_diagnosis(
                 **options,
             )
         except ValueError as e:
-            raise CliError(f"cannot diagnose with model '{name}': {e}") from None
+            raise CliError(
+                f"{named_files(tests)}: cannot diagnose with model '{name}': {e}"
+            ) from None
 
 
 def diagnose_command(args) -> int:
@@ -54,8 +58,11 @@ def diagnose_command(args) -> int:
     name, model = resolve_model(
         args, per_test_hint="diagnose fits shared parameters; give start values."
     )
+    outputs = []
     if args.report:
         require_folder_of(args.report, "--report")
+        outputs = report_files(args.report, DIAGNOSIS_REPORT_FILES)
+        refuse_inputs(outputs, input_files(args))
     tests = read_tests(args.data, data_options(args), args.every, progress)
     print(f"read {len(tests)} file(s):", file=log)
     print("\n".join(describe_tests(tests, args.every)), file=log)
@@ -82,7 +89,9 @@ def diagnose_command(args) -> int:
     if args.report:
         out = pathlib.Path(args.report)
         make_folder(out, "--report")
-        written = write_diagnosis_report(out, diagnosis, tests)
+        say_replacing([path for _, path in outputs], "--report", log)
+        with write_errors("--report", out):
+            written = write_diagnosis_report(out, diagnosis, tests)
         print(
             f"wrote the report to {out}{os.sep}: {', '.join(p.name for p in written)}",
             file=log,

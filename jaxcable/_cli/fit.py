@@ -11,10 +11,35 @@ import numpy as np
 from .._fit import FitResult, IdentifiabilityWarning, fit
 from .._models import AbstractCableModel
 from .._progress import Progress
-from .._report import write_report
+from .._report import FIT_REPORT_FILES, write_report
 from .common import CliError, make_folder, require_folder_of, show_progress
 from .data import data_options, describe_tests, read_tests
 from .models import names_option, resolve_model
+from .outputs import refuse_inputs, say_replacing, write_errors
+
+
+def input_files(args) -> list[tuple[str, str]]:
+    """(what, path) of the files a fit or diagnosis reads: its data and `--params`."""
+    inputs = [("DATA.csv", str(path)) for path in args.data]
+    if args.params:
+        inputs.append(("--params", args.params))
+    return inputs
+
+
+def report_files(folder, names) -> list[tuple[str, pathlib.Path]]:
+    """(option, path) of the files of a `--report` folder; fails when the folder is
+    an existing file."""
+    if os.path.exists(folder) and not os.path.isdir(folder):
+        raise CliError(f"--report {folder}: is a file, not a folder.")
+    return [("--report", pathlib.Path(folder) / name) for name in names]
+
+
+def named_files(tests) -> str:
+    """The files of `tests`, for an error about all of them."""
+    names = [str(t.source) for t in tests if t.source]
+    if len(names) > 3:
+        return f"{names[0]} and {len(names) - 1} other files"
+    return ", ".join(names) or "the data"
 
 
 def run_fit(
@@ -60,7 +85,9 @@ def run_fit(
                 throw=False,
             )
         except ValueError as e:
-            raise CliError(f"cannot fit model '{name}': {e}") from None
+            raise CliError(
+                f"{named_files(tests)}: cannot fit model '{name}': {e}"
+            ) from None
 
 
 def fit_failure(result: FitResult) -> CliError | None:
@@ -91,6 +118,10 @@ def fit_command(args) -> int:
     fit_names = names_option(args.fit, "--fit", model, name)
     per_test = names_option(args.per_test, "--per-test", model, name)
     require_folder_of(args.out, "--out")
+    outputs = [("--out", args.out)]
+    if args.report:
+        outputs += report_files(args.report, FIT_REPORT_FILES)
+    refuse_inputs(outputs, input_files(args))
     tests = read_tests(args.data, data_options(args), args.every, progress)
     print(f"read {len(tests)} file(s):")
     print("\n".join(describe_tests(tests, args.every)))
@@ -111,7 +142,9 @@ def fit_command(args) -> int:
     # one is written for inspection, then reported.
     if failure is not None and not np.isfinite(result.loss):
         raise failure
-    result.to_json(args.out)
+    say_replacing([args.out], "--out")
+    with write_errors("--out", args.out):
+        result.to_json(args.out)
     print(f"wrote {args.out}")
     if args.report:
         out = pathlib.Path(args.report)
@@ -121,14 +154,16 @@ def fit_command(args) -> int:
             notes.append("slack detection off (--no-slack)")
         if args.every > 1:
             notes.append(f"1 sample in {args.every} fitted (--every)")
-        written = write_report(
-            out,
-            result,
-            tests,
-            title=f"jaxcable fit: model '{name}'",
-            notes=notes,
-            progress=progress,
-        )
+        say_replacing([path for _, path in outputs[1:]], "--report")
+        with write_errors("--report", out):
+            written = write_report(
+                out,
+                result,
+                tests,
+                title=f"jaxcable fit: model '{name}'",
+                notes=notes,
+                progress=progress,
+            )
         print(
             f"wrote the report to {out}{os.sep}: {', '.join(p.name for p in written)}"
         )

@@ -85,6 +85,45 @@ def _check_plain_params(path: str, params, cls: type, name: str) -> dict:
     return params
 
 
+# The entries of a PARAMS.json that must be JSON objects, and the one that names the
+# model class.
+_OBJECTS = ("parameters", "static")
+
+
+def _read_fit(path: str, doc: dict) -> FitResult:
+    """The fit of the PARAMS.json `doc` read from `path`; a malformed one fails
+    naming the file and the entry."""
+    for document, where in _model_documents(doc):
+        if not isinstance(document.get("model"), str):
+            raise CliError(
+                f"{path}, {where}model: {_kind(document.get('model'))} is not a model "
+                'class name (a string such as "IntegratedModel").'
+            )
+        for key in _OBJECTS:
+            if key in document and not isinstance(document[key], dict):
+                raise CliError(
+                    f"{path}, {where}{key}: {_kind(document[key])} is not an object "
+                    "of name -> value."
+                )
+    try:
+        return FitResult.from_json(path)  # ValueError -> exit 2, naming the file
+    except (AttributeError, IndexError, KeyError, OverflowError, TypeError) as e:
+        raise CliError(f"{path}: malformed PARAMS.json ({e}).") from None
+
+
+def _model_documents(doc: dict, where: str = ""):
+    """(document, key path) of a model document and of the bases it wraps."""
+    yield doc, where
+    if isinstance(doc.get("base"), dict):
+        yield from _model_documents(doc["base"], f"{where}base.")
+
+
+def _kind(value) -> str:
+    """What `value` is, in a few words, for an error."""
+    text = json.dumps(value)
+    return text if len(text) <= 30 else f"a {type(value).__name__}"
+
+
 def _build_model(name: str, params: dict, params_path: str | None):
     """Model `name` built from `params` (its defaults for the others)."""
     where = params_path or "default parameters"
@@ -139,7 +178,7 @@ def resolve_model(args, *, per_test_hint: str) -> tuple[str, AbstractCableModel]
     path = args.params
     doc = read_json(path, "parameters")
     if isinstance(doc, dict) and doc.get("format") == "jaxcable-params":
-        result = FitResult.from_json(path)  # ValueError -> exit 2, naming the file
+        result = _read_fit(path, doc)
         name = cli_name(result.model)
         if name is None:
             raise CliError(

@@ -42,12 +42,14 @@ def _number(
     """
 
     def parse(text: str):
+        # A value of thousands of digits is cut short: the error is one line.
+        shown = text if len(text) <= 30 else f"{text[:20]}... ({len(text)} characters)"
         try:
             value = convert(text)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"{text!r} is not {noun}") from None
+            raise argparse.ArgumentTypeError(f"{shown!r} is not {noun}") from None
         if not valid(value):
-            raise argparse.ArgumentTypeError(f"{text} {requirement}")
+            raise argparse.ArgumentTypeError(f"{shown} {requirement}")
         return value
 
     return parse
@@ -55,6 +57,21 @@ def _number(
 
 _positive_int = _number(int, "an integer", lambda v: v >= 1, "must be at least 1")
 _non_negative_int = _number(int, "an integer", lambda v: v >= 0, "must be at least 0")
+# jax.random.key takes a 64-bit signed integer.
+_seed = _number(
+    int,
+    "an integer",
+    lambda v: -(2**63) <= v < 2**63,
+    "is not a 64-bit integer (-2^63 to 2^63-1)",
+)
+# The demo simulates 10 cycles of 2 ramps: at most 10^6 samples, as a protocol file.
+MAX_SAMPLES_PER_RAMP = 50_000
+_samples_per_ramp = _number(
+    int,
+    "an integer",
+    lambda v: 2 <= v <= MAX_SAMPLES_PER_RAMP,
+    f"must be from 2 to {MAX_SAMPLES_PER_RAMP:,}",
+)
 _positive_float = _number(
     float,
     "a number",
@@ -128,7 +145,7 @@ def _add_solver_options(parser, starts: int) -> None:
     )
     parser.add_argument(
         "--seed",
-        type=int,
+        type=_seed,
         default=0,
         metavar="N",
         help="seed of the random start perturbations (default: 0)",
@@ -362,7 +379,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     demo.add_argument(
         "--samples-per-ramp",
-        type=int,
+        type=_samples_per_ramp,
         default=1000,
         metavar="N",
         help="force samples per loading or unloading ramp of the simulated tests "

@@ -11,8 +11,10 @@ from .._cable import Cable
 from .._drive import simulate_force_history, simulate_rate_test
 from .._io import TestData, read_csv, read_protocol, write_csv
 from .._results import RESULTS
-from .common import CliError
+from .common import CliError, require_folder_of
+from .data import read_located
 from .models import params_metadata, resolve_model
+from .outputs import refuse_inputs, say_replacing, writing
 
 
 _PER_TEST = "choose the test to simulate with --test ID (or its index)."
@@ -50,8 +52,28 @@ def _check_success(traj, name: str, where: Callable[[int | None], str]) -> None:
     )
 
 
+def _check_times(time: np.ndarray, where: Callable[[int], str]) -> None:
+    """Fail unless the solved times are finite and increase, as the CSV reader
+    requires: a run never writes a file its own reader rejects."""
+    bad = np.flatnonzero(~np.isfinite(time[1:]) | ~(np.diff(time) > 0))
+    if bad.size:
+        i = int(bad[0]) + 1
+        raise CliError(
+            f"{where(i)}: the solved time of sample {i} ({time[i]:g} s) does not "
+            f"increase on the one before ({time[i - 1]:g} s); the samples are too "
+            "close together for this model and cable."
+        )
+
+
+def _write(args, data: TestData) -> None:
+    """Write `data` to `--out` atomically, saying so when it replaces a file."""
+    say_replacing([args.out], "--out")
+    with writing("--out", args.out) as tmp:
+        write_csv(tmp, data)
+
+
 def _simulate_history(args) -> int:
-    data = read_csv(args.input)
+    data = read_located(read_csv, args.input)
     cable = data.cable()
     _check_force(data, cable)
     name, model = resolve_model(args, per_test_hint=_PER_TEST)
@@ -71,7 +93,7 @@ def _simulate_history(args) -> int:
     out = dataclasses.replace(
         data, elongation=np.asarray(traj.elongation), metadata=metadata
     )
-    write_csv(args.out, out)
+    _write(args, out)
     print(f"wrote {args.out} ({data.num_samples} samples, model '{name}')")
     return 0
 
@@ -86,6 +108,7 @@ def _simulate_protocol(args) -> int:
         return args.input if segment is None else f"{args.input}, segments[{segment}]"
 
     _check_success(traj, name, where)
+    _check_times(np.asarray(traj.time), where)
     metadata = {
         **spec.metadata,
         "protocol": pathlib.Path(args.input).name,
@@ -99,7 +122,7 @@ def _simulate_protocol(args) -> int:
         elongation=np.asarray(traj.elongation),
         metadata=metadata,
     )
-    write_csv(args.out, data)
+    _write(args, data)
     duration = float(data.time[-1])
     print(
         f"wrote {args.out} ({data.num_samples} samples over {duration:.6g} s, "
@@ -110,6 +133,11 @@ def _simulate_protocol(args) -> int:
 
 def simulate_command(args) -> int:
     """Run `jaxcable simulate` with the parsed command line `args`; the exit status."""
+    require_folder_of(args.out, "--out")
+    inputs = [("PROTOCOL.json|HISTORY.csv", args.input)]
+    if args.params:
+        inputs.append(("--params", args.params))
+    refuse_inputs([("--out", args.out)], inputs)
     if args.input.lower().endswith(".json"):
         return _simulate_protocol(args)
     return _simulate_history(args)

@@ -5,11 +5,11 @@ decide significance."""
 import dataclasses
 import json
 import math
-import pathlib
 from typing import Any
 
 import numpy as np
 
+from .._files import write_text_atomic
 from .._fit import FitResult
 
 
@@ -158,10 +158,10 @@ class Diagnosis:
         }
 
     def to_json(self, path=None) -> str:
-        """The diagnosis as JSON text (written to `path` when given)."""
+        """The diagnosis as JSON text (written to `path` when given, atomically)."""
         text = json.dumps(self.to_dict(), indent=2)
         if path is not None:
-            pathlib.Path(path).write_text(text + "\n", encoding="utf-8")
+            write_text_atomic(path, text + "\n")
         return text
 
     def summary(self) -> str:

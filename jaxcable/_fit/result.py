@@ -5,12 +5,12 @@ import importlib.metadata
 import json
 import math
 import os
-import pathlib
 from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 
+from .._files import write_text_atomic
 from .._io import parse_json, read_json
 from .._models import AbstractCableModel
 from .parameters import test_slice
@@ -156,7 +156,8 @@ class FitResult:
 
         **Arguments:**
 
-        - `path`: optional file to write.
+        - `path`: optional file to write (atomically: a write cut short leaves the
+            old file).
 
         **Returns:**
 
@@ -200,7 +201,7 @@ class FitResult:
         }
         text = json.dumps(document, indent=2)
         if path is not None:
-            pathlib.Path(path).write_text(text + "\n", encoding="utf-8")
+            write_text_atomic(path, text + "\n")
         return text
 
     @classmethod

@@ -34,6 +34,14 @@ keys:
 Ramps run at the crosshead speed; the time of each ramp sample is solved by the model
 ([`jaxcable.simulate_rate_test`][]). Unknown keys are errors (a misspelt key would
 otherwise be silently ignored).
+
+Every number must be physical, so that a run never succeeds on a cable no test could
+hold: the length within 1 mm to 10 km, the diameter 0.01 mm to 1 m, the speed 1e-6
+to 1e7 mm/min, every duration at most 1e10 s (about 300 years) and at least 1 µs a
+sample, every force at most the cable's breaking load and a stress of 10 GPa (above
+any polymer fibre's strength), every ramp at least 1 µN a sample. A protocol has at
+most 100,000 cycles a segment and 1,000,000 samples in all (a larger one would take
+hours and gigabytes to solve).
 """
 
 import json
@@ -72,6 +80,19 @@ _DEFAULT_SAMPLES_PER_RAMP = 200
 _DEFAULT_RAMP_SAMPLES = 100
 _DEFAULT_HOLD_SAMPLES = 10
 _DEFAULT_REST_SAMPLES = 24
+# Physical ranges of the cable (the docstring says why): key -> (low, high, unit).
+_CABLE_RANGES = {
+    "length_mm": (1.0, 1e7, "mm"),
+    "diameter_mm": (0.01, 1e3, "mm"),
+    "rate_mm_per_min": (1e-6, 1e7, "mm/min"),
+}
+_MAX_DURATION_S = 1e10
+_MIN_STEP_S = 1e-6  # the shortest sample of a hold or rest
+_MIN_FORCE_STEP_N = 1e-6  # the smallest force step of a ramp
+_MAX_STRESS_PA = 1e10
+# Resource limits: the rate solve is sequential, about 10^4-10^5 samples a second.
+MAX_SAMPLES = 1_000_000
+MAX_CYCLES = 100_000
 # A hold's `force_N` equals the current force when it is within this (relative).
 _SAME_FORCE = 1e-9
 
@@ -103,6 +124,22 @@ def _is_json_number(value: Any) -> bool:
     return isinstance(value, int | float) and not isinstance(value, bool)
 
 
+def _repeat(protocol: Protocol, times: int) -> Protocol:
+    """`protocol` run `times` times in a row."""
+    return Protocol(
+        **{
+            name: np.tile(np.asarray(getattr(protocol, name)), times)
+            for name in ("force", "direction", "duration", "mask")
+        }
+    )
+
+
+def _show(value: Any) -> str:
+    """`value` as JSON, cut short: the error's one line stays readable."""
+    text = json.dumps(value)
+    return text if len(text) <= 40 else f"{text[:30]}... ({len(text)} characters)"
+
+
 class _Reader:
     """Typed access to one JSON object, with errors naming the file and key path."""
 
@@ -128,20 +165,42 @@ class _Reader:
             return float(default)
         value = self.obj[key]
         if not _is_json_number(value) or not math.isfinite(value):
-            raise self.error(
-                key, f"{json.dumps(value)} is not a finite number ({unit})."
-            )
+            raise self.error(key, f"{_show(value)} is not a finite number ({unit}).")
         if not (value > 0 or (allow_zero and value == 0)):
             bound = ">= 0" if allow_zero else "> 0"
             raise self.error(key, f"{value:g} {unit} must be {bound}.")
         return float(value)
+
+    def within(self, key: str, value: float, low: float, high: float, unit: str):
+        """`value` (of `key`), refused unless `low <= value <= high`."""
+        if not low <= value <= high:
+            raise self.error(
+                key, f"{value:g} {unit} is outside {low:g}-{high:g} {unit}."
+            )
+        return value
+
+    def duration(self, key: str, seconds: float, samples: int) -> float:
+        """`seconds` (of `key`), refused beyond the duration limits."""
+        if seconds > _MAX_DURATION_S:
+            raise self.error(
+                key, f"{seconds:g} s is longer than {_MAX_DURATION_S:g} s."
+            )
+        if seconds / samples < _MIN_STEP_S:
+            raise self.error(
+                key,
+                f"{seconds:g} s in {samples} samples is less than {_MIN_STEP_S:g} s "
+                "a sample (time stamps must increase).",
+            )
+        return seconds
 
     def count(self, key: str, default: int) -> int:
         if key not in self.obj:
             return default
         value = self.obj[key]
         if not (_is_json_number(value) and float(value).is_integer() and value >= 1):
-            raise self.error(key, f"{json.dumps(value)} is not an integer >= 1.")
+            raise self.error(key, f"{_show(value)} is not an integer >= 1.")
+        if value > MAX_SAMPLES:
+            raise self.error(key, f"{value:g} is more than {MAX_SAMPLES:,}.")
         return int(value)
 
 
@@ -179,18 +238,23 @@ def read_protocol(path: str | os.PathLike) -> ProtocolFile:
                 f"{', '.join(_TOP_LEVEL)})."
             )
     top = _Reader(path, "", doc)
-    length = top.number("length_mm", "mm")
-    diameter = top.number("diameter_mm", "mm", DEFAULT_DIAMETER_MM)
-    rate = top.number("rate_mm_per_min", "mm/min", DEFAULT_RATE_MM_PER_MIN)
+    length, diameter, rate = (
+        top.within(key, top.number(key, unit, default), low, high, unit)
+        for (key, (low, high, unit)), default in zip(
+            _CABLE_RANGES.items(),
+            (None, DEFAULT_DIAMETER_MM, DEFAULT_RATE_MM_PER_MIN),
+        )
+    )
     metadata: dict[str, float | str] = {}
     for key in _STRINGS:
         if key in doc:
             if not isinstance(doc[key], str):
-                raise top.error(key, f"{json.dumps(doc[key])} is not a string.")
+                raise top.error(key, f"{_show(doc[key])} is not a string.")
             metadata[key] = doc[key]
     metadata.update(length_mm=length, diameter_mm=diameter, rate_mm_per_min=rate)
     cable = Cable.from_mm(length_mm=length, diameter_mm=diameter, rate_mm_per_min=rate)
-    limit = float(cable.breaking_load)
+    breaking = float(cable.breaking_load)
+    strongest = _MAX_STRESS_PA * float(cable.area)
 
     if "segments" not in doc:
         raise ValueError(
@@ -210,18 +274,42 @@ def read_protocol(path: str | os.PathLike) -> ProtocolFile:
         if default is not None and key not in reader.obj:
             return default
         value = reader.number(key, "N", allow_zero=True)
-        if value > limit:
+        if value > breaking:
             raise reader.error(
-                key, f"{value:g} N exceeds the cable's breaking load ({limit:g} N)."
+                key, f"{value:g} N exceeds the cable's breaking load ({breaking:g} N)."
+            )
+        if value > strongest:
+            raise reader.error(
+                key,
+                f"{value:g} N on a {diameter:g} mm cable is a stress above "
+                f"{_MAX_STRESS_PA / 1e9:g} GPa (no polymer fibre holds it).",
             )
         return value
+
+    def ramp_samples(reader: _Reader, key: str, start: float, end: float, n: int):
+        if abs(end - start) / n < _MIN_FORCE_STEP_N:
+            raise reader.error(
+                key,
+                f"{start:g} to {end:g} N in {n} samples is less than "
+                f"{_MIN_FORCE_STEP_N:g} N a sample (time stamps must increase).",
+            )
+        return n
+
+    def room(reader: _Reader, key: str, wanted: int) -> None:
+        # Checked before the segment is built: a huge one would not fit in memory.
+        if num_samples + wanted > MAX_SAMPLES:
+            raise reader.error(
+                key,
+                f"the protocol would have {num_samples + wanted:,} samples, more "
+                f"than {MAX_SAMPLES:,}; split it into several files.",
+            )
 
     for i, segment in enumerate(segments):
         where = f"segments[{i}]"
         if not isinstance(segment, dict):
             raise ValueError(
                 f"{path}, {where}: a segment is a JSON object such as "
-                f'{{"ramp_to_N": 50}}, got {json.dumps(segment)}.'
+                f'{{"ramp_to_N": 50}}, got {_show(segment)}.'
             )
         kinds = [k for k in _SEGMENTS if k in segment]
         if len(kinds) != 1:
@@ -240,10 +328,14 @@ def read_protocol(path: str | os.PathLike) -> ProtocolFile:
         r = _Reader(path, where, segment)
         if kind == "cycles":
             cycles = r.count("cycles", 1)
+            if cycles > MAX_CYCLES:
+                raise r.error("cycles", f"{cycles:,} is more than {MAX_CYCLES:,}.")
             high = force_value(r, "force_max_N")
             low = force_value(r, "force_min_N", 0.0)
             spr = r.count("samples_per_ramp", _DEFAULT_SAMPLES_PER_RAMP)
             hold = r.number("peak_hold_s", "s", 0.0, allow_zero=True)
+            if hold > 0:
+                r.duration("peak_hold_s", hold, 1)
             if not high > force:
                 raise r.error(
                     "force_max_N",
@@ -254,14 +346,16 @@ def read_protocol(path: str | os.PathLike) -> ProtocolFile:
                 raise r.error(
                     "force_min_N", f"{low:g} N must be below force_max_N ({high:g} N)."
                 )
-            segment_parts = []
-            start = force
-            for _ in range(cycles):
-                segment_parts.append(Protocol.ramp(start, high, spr))
-                if hold > 0:
-                    segment_parts.append(Protocol.hold(high, hold, 1))
-                segment_parts.append(Protocol.ramp(high, low, spr))
-                start = low
+            ramp_samples(r, "force_max_N", force, high, spr)
+            ramp_samples(r, "force_min_N", low, high, spr)
+            room(r, "cycles", cycles * (2 * spr + (hold > 0)))
+            peak = [Protocol.hold(high, hold, 1)] if hold > 0 else []
+            down = Protocol.ramp(high, low, spr)
+            segment_parts = [Protocol.ramp(force, high, spr), *peak, down]
+            if cycles > 1:
+                # Every cycle after the first is the same: one, tiled.
+                later = Protocol.concatenate(Protocol.ramp(low, high, spr), *peak, down)
+                segment_parts.append(_repeat(later, cycles - 1))
             force = low
         elif kind == "ramp_to_N":
             target = force_value(r, "ramp_to_N")
@@ -272,12 +366,16 @@ def read_protocol(path: str | os.PathLike) -> ProtocolFile:
                     f"the previous segment already ends at {force:g} N; a ramp "
                     "needs another force.",
                 )
+            ramp_samples(r, "ramp_to_N", force, target, samples)
+            room(r, "samples", samples)
             segment_parts = [Protocol.ramp(force, target, samples)]
             force = target
         elif kind == "hold_s":
             duration = r.number("hold_s", "s")
             held = force_value(r, "force_N", force)
             samples = r.count("samples", _DEFAULT_HOLD_SAMPLES)
+            r.duration("hold_s", duration, samples)
+            room(r, "samples", samples)
             if abs(held - force) > _SAME_FORCE * max(1.0, abs(force)):
                 raise r.error(
                     "force_N",
@@ -291,6 +389,8 @@ def read_protocol(path: str | os.PathLike) -> ProtocolFile:
             if kind == "rest_h":
                 duration *= 3600.0
             samples = r.count("samples", _DEFAULT_REST_SAMPLES)
+            r.duration(kind, duration, samples)
+            room(r, "samples", samples)
             if force != 0.0:
                 raise r.error(
                     kind,

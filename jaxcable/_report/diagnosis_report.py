@@ -9,8 +9,20 @@ import pathlib
 import numpy as np
 
 from .._diagnose import MIN_GAIN_PCT, Diagnosis, heldout_start, model_elongations
+from .._files import write_text_atomic
 from .._fit import as_test_list
-from .plots import panels, residual_axes, time_axis
+from .plots import panels, residual_axes, save_png, time_axis
+
+
+# The files of the diagnosis report, in the order `write_diagnosis_report` returns
+# them (so that a command can check them against its inputs before writing).
+DIAGNOSIS_REPORT_FILES = (
+    "diagnosis.json",
+    "summary.md",
+    "residuals.png",
+    "candidates.png",
+    "structure.png",
+)
 
 
 def _plot_residuals(path, diagnosis: Diagnosis, tests: list) -> None:
@@ -46,7 +58,7 @@ def _plot_residuals(path, diagnosis: Diagnosis, tests: list) -> None:
         f"Residuals before/after (held-out part shaded): named cause "
         f"{diagnosis.named_cause}"
     )
-    fig.savefig(path, dpi=90)
+    save_png(fig, path)
 
 
 def _plot_candidates(path, diagnosis: Diagnosis) -> None:
@@ -69,7 +81,7 @@ def _plot_candidates(path, diagnosis: Diagnosis) -> None:
     ax.invert_yaxis()
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3, axis="x")
-    fig.savefig(path, dpi=90)
+    save_png(fig, path)
 
 
 def _plot_structure(path, diagnosis: Diagnosis) -> None:
@@ -92,7 +104,7 @@ def _plot_structure(path, diagnosis: Diagnosis) -> None:
     )
     ax.invert_yaxis()
     ax.grid(alpha=0.3, axis="x")
-    fig.savefig(path, dpi=90)
+    save_png(fig, path)
 
 
 def _candidate_table(diagnosis: Diagnosis) -> list[str]:
@@ -135,23 +147,21 @@ def write_diagnosis_report(out, diagnosis: Diagnosis, tests) -> list[pathlib.Pat
     out = pathlib.Path(out)
     out.mkdir(parents=True, exist_ok=True)
     whole = [dataclasses.replace(t, mask=None) for t in as_test_list(tests)]
-    residuals_png = out / "residuals.png"
+    json_path, summary, residuals_png, candidates_png, structure_png = (
+        out / name for name in DIAGNOSIS_REPORT_FILES
+    )
     _plot_residuals(residuals_png, diagnosis, whole)
-    candidates_png = out / "candidates.png"
     _plot_candidates(candidates_png, diagnosis)
-    structure_png = out / "structure.png"
     _plot_structure(structure_png, diagnosis)
 
-    json_path = out / "diagnosis.json"
     diagnosis.to_json(json_path)
-    summary = out / "summary.md"
-    summary.write_text(
+    write_text_atomic(
+        summary,
         "# jaxcable diagnose\n\n```\n"
         + diagnosis.summary()
         + "\n```\n\n"
         + "\n".join(_candidate_table(diagnosis))
         + "\n\n![residuals](residuals.png)\n![candidates](candidates.png)\n"
         + "![structure](structure.png)\n",
-        encoding="utf-8",
     )
     return [json_path, summary, residuals_png, candidates_png, structure_png]

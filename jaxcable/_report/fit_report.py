@@ -3,6 +3,7 @@ tables (per-test RMSE, parameters with standard errors, correlations, identifiab
 and `write_report`, which writes them with the plots."""
 
 import csv
+import io
 import math
 import pathlib
 from collections.abc import Sequence
@@ -10,10 +11,16 @@ from collections.abc import Sequence
 import numpy as np
 
 from .._diagnose import model_elongations
+from .._files import write_text_atomic
 from .._fit import FitResult
 from .._io import TestData
 from .._progress import Progress
 from .plots import plot_loops, plot_residuals
+
+
+# The files of the fit report, in the order `write_report` returns them (so that a
+# command can check them against its inputs before writing).
+FIT_REPORT_FILES = ("fit_loops.png", "fit_residuals.png", "summary.md", "rmse.csv")
 
 
 def _g(x: float, digits: int = 4) -> str:
@@ -143,28 +150,29 @@ def write_report(
     with Progress("report", 3, enabled=progress) as bar:
         model = model_elongations(result, tests)
         bar.advance(note="simulated")
-        loops, resid = out / "fit_loops.png", out / "fit_residuals.png"
+        loops, resid = (out / name for name in FIT_REPORT_FILES[:2])
         plot_loops(loops, result, tests, model)
         bar.advance(note=loops.name)
         plot_residuals(resid, result, tests, model)
         bar.advance(note=resid.name)
-    summary = out / "summary.md"
-    summary.write_text(
-        summary_markdown(result, tests, title=title, notes=notes), encoding="utf-8"
+    summary = out / FIT_REPORT_FILES[2]
+    write_text_atomic(
+        summary, summary_markdown(result, tests, title=title, notes=notes)
     )
-    table = out / "rmse.csv"
-    with open(table, "w", newline="", encoding="utf-8") as f:
-        writer = csv.writer(f, lineterminator="\n")
-        writer.writerow(["id", "file", "samples", "masked", "rmse_mm", "rmse_percent"])
-        for i, test in enumerate(tests):
-            writer.writerow(
-                [
-                    result.test_ids[i],
-                    pathlib.Path(test.source).name if test.source else "",
-                    int(result.num_samples[i]),
-                    int(np.sum(~test.mask)),
-                    f"{result.rmse_mm[i]:.6g}",
-                    f"{result.rmse_percent[i]:.6g}",
-                ]
-            )
+    table = out / FIT_REPORT_FILES[3]
+    rows = io.StringIO()
+    writer = csv.writer(rows, lineterminator="\n")
+    writer.writerow(["id", "file", "samples", "masked", "rmse_mm", "rmse_percent"])
+    for i, test in enumerate(tests):
+        writer.writerow(
+            [
+                result.test_ids[i],
+                pathlib.Path(test.source).name if test.source else "",
+                int(result.num_samples[i]),
+                int(np.sum(~test.mask)),
+                f"{result.rmse_mm[i]:.6g}",
+                f"{result.rmse_percent[i]:.6g}",
+            ]
+        )
+    write_text_atomic(table, rows.getvalue())
     return [loops, resid, summary, table]

@@ -2,16 +2,25 @@
 force vs elongation (measured and model) and of the residuals against time.
 
 Figures use matplotlib's object-oriented API, not pyplot: no global backend or figure
-state, and `Figure.savefig` renders PNG with Agg.
+state, and `Figure.savefig` renders PNG with Agg, into a temporary file renamed over
+the target (`save_png`): a run cut short leaves the old plot, never half a PNG.
 """
 
 import math
+import os
 from collections.abc import Sequence
 
 import numpy as np
 
+from .._files import atomic_path
 from .._fit import FitResult
 from .._io import TestData
+
+
+def save_png(fig, path: str | os.PathLike, dpi: int = 90) -> None:
+    """Write the matplotlib figure `fig` to `path` as PNG, atomically."""
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png", dpi=dpi)
 
 
 def panels(n: int, width: float, height: float, title_height: float):
@@ -102,7 +111,7 @@ def plot_loops(
         if i == 0:
             ax.legend(fontsize=8)
     fig.suptitle(f"{type(result.model).__name__}: measured vs model")
-    fig.savefig(path, dpi=90)
+    save_png(fig, path)
 
 
 def plot_residuals(
@@ -125,4 +134,4 @@ def plot_residuals(
             ax.legend(fontsize=8)
         residual_axes(ax, result.test_ids[i], label, log)
     fig.suptitle(f"{type(result.model).__name__}: residuals")
-    fig.savefig(path, dpi=90)
+    save_png(fig, path)
