@@ -242,7 +242,7 @@ class FitResult:
             raise ValueError(f"`source` {where}: {unknown}")
         try:
             return cls._from_document(doc)
-        except (KeyError, TypeError, ValueError) as e:
+        except (KeyError, TypeError, ValueError, AttributeError, OverflowError) as e:
             raise ValueError(
                 f"`source` {where}: malformed PARAMS.json ({e})."
             ) from None
