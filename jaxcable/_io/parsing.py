@@ -28,9 +28,19 @@ from .units import (
 _ENCODINGS = ("utf-8-sig", "gb18030", "latin-1")
 
 
+def _decode(raw: bytes) -> str:
+    """`raw` decoded with the first of `_ENCODINGS` that decodes it."""
+    for candidate in _ENCODINGS[:-1]:
+        try:
+            return raw.decode(candidate)
+        except UnicodeDecodeError:
+            continue
+    return raw.decode(_ENCODINGS[-1])
+
+
 def _read_text(path, encoding: str | None = None) -> str:
-    """The file's text, decoded with `encoding` or the first of `_ENCODINGS` that
-    decodes it."""
+    """The file's text, decoded with `encoding`, else with the first of `_ENCODINGS`
+    that decodes it whole, else line by line."""
     with open(path, "rb") as f:
         raw = f.read()
     if encoding is None:
@@ -39,7 +49,11 @@ def _read_text(path, encoding: str | None = None) -> str:
                 return raw.decode(candidate)
             except UnicodeDecodeError:
                 continue
-        return raw.decode(_ENCODINGS[-1])
+        # Mixed encodings (a GBK header, a stray byte in a row): decoded whole as
+        # latin-1, the header would turn to mojibake and its columns go unmatched;
+        # line by line, the header keeps its encoding and the stray byte's row is
+        # reported. Line ends are the same bytes in all of `_ENCODINGS`.
+        return "".join(map(_decode, re.split(rb"(\r\n|\r|\n)", raw)))
     try:
         text = raw.decode(encoding)
     except LookupError:
