@@ -59,6 +59,12 @@ MATCHED_UNITS = {
 TYPOS = ("N/A", "O.5", "1..5", "abc", "-", "1_0", "--", "1e5x", "?", "0.5.1", "l0")
 NON_FINITE = ("nan", "NaN", "inf", "-inf", "Infinity", "1e999")
 EXTREMES = ("1e308", "-1e308", "1.7976931348623157e308", "1e-320", "5e-324", "-0")
+# Typos count twice: the commonest corruption.
+CORRUPTIONS = (
+    *("typo", "typo", "empty-cell", "stray-separator", "one-cell", "units-row"),
+    *("text-row", "time-back", "non-finite", "extreme", "long-cell", "bytes"),
+    *("blank", "comment", "quotes", "spaces", "trailing-separator", "nul"),
+)
 PREAMBLE = ("Test report", "Operator: A. N. Other", "Machine: Zwick Z010")
 TEXT_ROWS = ("End of test", "Pause", "Sample broke", "*** STOP ***")
 # Kinds of line: data rows, rows the reader must refuse, rows it may skip or
@@ -263,28 +269,7 @@ def _corrupt(rng, rows, sep, decimal_comma, tokens, time_col, layout) -> str:
     index = {"first": data[0], "last": data[-1]}.get(place, rng.choice(data))
     row = rows[index]
     column = rng.randint(0, len(row.cells) - 1)
-    kind = rng.choice(
-        (
-            "typo",
-            "typo",
-            "empty-cell",
-            "stray-separator",
-            "one-cell",
-            "units-row",
-            "text-row",
-            "time-back",
-            "non-finite",
-            "extreme",
-            "long-cell",
-            "bytes",
-            "blank",
-            "comment",
-            "quotes",
-            "spaces",
-            "trailing-separator",
-            "nul",
-        )
-    )
+    kind = rng.choice(CORRUPTIONS)
     name = f"{kind}@{place}"
     if kind == "typo":
         row.cells[column] = rng.choice(TYPOS)
