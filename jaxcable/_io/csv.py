@@ -22,6 +22,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from .._files import atomic_path
 from .parsing import (
     assemble,
     map_columns,
@@ -39,7 +40,8 @@ def read_csv(path: str | os.PathLike, **overrides: float | str) -> TestData:
     """Read a test history in the canonical CSV format.
 
     The file starts with `# key: value` lines (`length_mm` required; `diameter_mm`,
-    `rate_mm_per_min`, `temperature_C`, `material`, `id` and any other keys optional),
+    `rate_mm_per_min`, `temperature_C`, `breaking_load_N`, `material`, `id` and any
+    other keys optional),
     then a header line naming the columns with their units (`time_s` and `force_N`
     required; `elongation_mm` and `temperature_C` optional; also accepted: `time_ms`,
     `time_min`, `time_h`, `force_kN`, `elongation_m`; any other column is kept as an
@@ -61,7 +63,9 @@ def read_csv(path: str | os.PathLike, **overrides: float | str) -> TestData:
 
     `ValueError` naming the file, the 1-based line and the column (or metadata key) of
     the first problem: a missing required column, a non-numeric, empty, NaN or
-    infinite cell, time not strictly increasing, or no `length_mm` metadata.
+    infinite cell, a value out of range in SI units, time not strictly increasing
+    (in the file's unit or in seconds), a numeric metadata value that is not a
+    finite number the [`jaxcable.Cable`][] accepts, or no `length_mm` metadata.
     """
     lines = read_lines(path)
     metadata, header = parse_metadata(lines, path)
@@ -119,7 +123,9 @@ def write_csv(path: str | os.PathLike, data: TestData) -> None:
 
     **Arguments:**
 
-    - `path`: the file to (over)write.
+    - `path`: the file to (over)write, atomically: the text goes to a temporary file
+        beside it, renamed over it once written, so a write cut short leaves `path`
+        as it was.
     - `data`: a [`jaxcable.TestData`][]; its metadata must have `length_mm`.
 
     **Returns:**
@@ -145,5 +151,6 @@ def write_csv(path: str | os.PathLike, data: TestData) -> None:
     out.append(",".join(names))
     table = np.stack(columns, axis=1).tolist()
     out.extend(",".join(map(repr, row)) for row in table)
-    with open(path, "w", encoding="utf-8", newline="\n") as f:
+    # Atomically: a write cut short leaves the file as it was, never truncated.
+    with atomic_path(path) as tmp, open(tmp, "w", encoding="utf-8", newline="\n") as f:
         f.write("\n".join(out) + "\n")

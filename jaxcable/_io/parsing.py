@@ -28,9 +28,19 @@ from .units import (
 _ENCODINGS = ("utf-8-sig", "gb18030", "latin-1")
 
 
+def _decode(raw: bytes) -> str:
+    """`raw` decoded with the first of `_ENCODINGS` that decodes it."""
+    for candidate in _ENCODINGS[:-1]:
+        try:
+            return raw.decode(candidate)
+        except UnicodeDecodeError:
+            continue
+    return raw.decode(_ENCODINGS[-1])
+
+
 def _read_text(path, encoding: str | None = None) -> str:
-    """The file's text, decoded with `encoding` or the first of `_ENCODINGS` that
-    decodes it."""
+    """The file's text, decoded with `encoding`, else with the first of `_ENCODINGS`
+    that decodes it whole, else line by line."""
     with open(path, "rb") as f:
         raw = f.read()
     if encoding is None:
@@ -39,7 +49,11 @@ def _read_text(path, encoding: str | None = None) -> str:
                 return raw.decode(candidate)
             except UnicodeDecodeError:
                 continue
-        return raw.decode(_ENCODINGS[-1])
+        # Mixed encodings (a GBK header, a stray byte in a row): decoded whole as
+        # latin-1, the header would turn to mojibake and its columns go unmatched;
+        # line by line, the header keeps its encoding and the stray byte's row is
+        # reported. Line ends are the same bytes in all of `_ENCODINGS`.
+        return "".join(map(_decode, re.split(rb"(\r\n|\r|\n)", raw)))
     try:
         text = raw.decode(encoding)
     except LookupError:
@@ -76,8 +90,12 @@ def metadata_value(key: str, value, place: str) -> float | str:
         raise ValueError(f"{place}: {str(value)!r} is not a number.") from None
     if not math.isfinite(number):
         raise ValueError(f"{place}: {str(value)!r} is not a finite number.")
-    if NUMERIC_METADATA[key] and number <= 0:
-        raise ValueError(f"{place}: must be positive, got {number:g}.")
+    bound = NUMERIC_METADATA[key]
+    if number <= bound.minimum:
+        what = "positive" if bound.minimum == 0 else f"above {bound.minimum:g}"
+        raise ValueError(f"{place}: must be {what}, got {number:g}.")
+    if not (number - bound.minimum) * bound.to_si > 0:
+        raise ValueError(f"{place}: {number:g} is too small (0 in SI units).")
     return number
 
 
@@ -182,7 +200,44 @@ def split_cells(line: str, sep: str) -> list[str]:
     # line without quotes splits the same way by str.split, several times faster.
     if '"' not in line:
         return line.split(sep)
-    return next(csv.reader([line], delimiter=sep), [])
+    try:
+        return next(csv.reader([line], delimiter=sep), [])
+    except csv.Error:
+        # A cell over csv's field size limit (128 KiB): the same rules, in Python.
+        return _split_quoted(line, sep)
+
+
+def _split_quoted(line: str, sep: str) -> list[str]:
+    """`split_cells` of a line that `csv` refuses, by `csv`'s rules for its default
+    dialect: a cell that starts with a quote runs to the next lone quote (`""` is
+    a quote in it); anything after that quote up to the separator is kept."""
+    cells: list[str] = []
+    cell: list[str] = []
+    quoted, at_start = False, True
+    i = 0
+    while i < len(line):
+        char = line[i]
+        if quoted:
+            if char == '"' and line.startswith('""', i):
+                cell.append('"')
+                i += 1
+            elif char == '"':
+                quoted = False
+            else:
+                cell.append(char)
+        elif char == sep:
+            cells.append("".join(cell))
+            cell, at_start = [], True
+            i += 1
+            continue
+        elif char == '"' and at_start:
+            quoted = True
+        else:
+            cell.append(char)
+        at_start = False
+        i += 1
+    cells.append("".join(cell))
+    return cells
 
 
 def row_cells(line: str, sep: str) -> list[str]:
@@ -196,6 +251,10 @@ def row_cells(line: str, sep: str) -> list[str]:
 
 def parse_number(cell: str, decimal_comma: bool) -> float:
     """`float(cell)`, reading `1,5` as 1.5 when the file uses decimal commas."""
+    # float() reads `1_5` as 15 (Python's digit grouping), which no tester writes: a
+    # typo, to be reported rather than read as a number ten times too large.
+    if "_" in cell:
+        raise ValueError(f"{cell!r} is not a number")
     if decimal_comma:
         cell = cell.replace(",", ".")
     return float(cell)
@@ -306,17 +365,42 @@ def _parse_rows_fast(
     return values, np.asarray(numbers, dtype=int)
 
 
-def _require_increasing_time(time, line_numbers, column: ColumnMap, path) -> None:
-    steps = np.diff(time)
-    bad = np.flatnonzero(steps <= 0)
+def _require_increasing_time(
+    time, line_numbers, column: ColumnMap, path, converted: bool = False
+) -> None:
+    """Raise `ValueError` at the first time stamp that does not follow the one
+    before (`converted`: the stamps in seconds, where distinct stamps in the file's
+    unit may have become equal)."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        steps = np.diff(time)
+    bad = np.flatnonzero(~(steps > 0))
     if bad.size:
         i = int(bad[0]) + 1
         what = "a repeated time stamp" if time[i] == time[i - 1] else "time goes back"
+        if converted:
+            what += f" after the conversion from {column.name} to seconds"
         raise ValueError(
             f"{where(path, int(line_numbers[i]), column.name, column.position)}: "
             f"time must be strictly increasing, but {time[i]:g} follows "
             f"{time[i - 1]:g} (line {int(line_numbers[i - 1])}): {what}."
         )
+
+
+def _to_si(values, line_numbers, column: ColumnMap, path) -> np.ndarray:
+    """A column in SI units, checked finite: a value near the largest float may
+    overflow (`1e306` h is `inf` s)."""
+    with np.errstate(over="ignore"):
+        converted = values * column.to_si
+    bad = np.flatnonzero(~np.isfinite(converted))
+    if bad.size:
+        i = int(bad[0])
+        raise ValueError(
+            f"{where(path, int(line_numbers[i]), column.name, column.position)}: "
+            f"{values[i]:g} is out of range ({converted[i]:g} in SI units)."
+        )
+    if column.quantity == "time" and column.to_si != 1.0:
+        _require_increasing_time(converted, line_numbers, column, path, True)
+    return converted
 
 
 def assemble(
@@ -328,7 +412,8 @@ def assemble(
     header_line: int | None,
 ) -> TestData:
     """Build the [`jaxcable.TestData`][] of parsed rows: unit conversion, time and
-    metadata checks."""
+    metadata checks (time strictly increasing in the file's unit and in seconds,
+    every value finite in SI units)."""
     fields: dict[str, np.ndarray] = {}
     extra: dict[str, np.ndarray] = {}
     for position, column in enumerate(columns):
@@ -337,11 +422,13 @@ def assemble(
         if column.quantity is None:
             extra[column.name] = values[:, position]
         else:
-            fields[column.quantity] = values[:, position] * column.to_si
             if column.quantity == "time":
                 _require_increasing_time(
                     values[:, position], line_numbers, column, path
                 )
+            fields[column.quantity] = _to_si(
+                values[:, position], line_numbers, column, path
+            )
     if "length_mm" not in metadata:
         raise ValueError(
             f"{where(path, header_line)}, metadata 'length_mm': missing (the free "

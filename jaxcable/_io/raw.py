@@ -14,7 +14,13 @@ from .parsing import (
     parse_rows,
     read_lines,
 )
-from .sniff import find_data_start, header_columns, sniff_separator
+from .sniff import (
+    data_above,
+    data_below_header,
+    find_data_start,
+    header_columns,
+    sniff_separator,
+)
 from .testdata import TestData, mask_slack
 from .units import COLUMNS, IGNORE, accepted_names, missing_quantities
 
@@ -81,8 +87,13 @@ def read_test(
         into numbers (a semicolon or tab file may write decimal commas, `1,5`).
     - *Encoding*: UTF-8 (with or without byte-order mark), else GB18030 (GBK), else
         latin-1, so a header in any encoding reads.
-    - *Rows to skip* (`skip_rows`): the lines before the first data row, found as the
-        first row of numbers (blank lines, preamble, header and unit rows skipped).
+    - *Rows to skip* (`skip_rows`): the lines before the first data row. Detected:
+        every row under the header is data (blank and comment lines and a units row
+        right under the header aside), so a typo in the first rows (`N/A`, `O.5`, a
+        stray separator) is an error, as further down; without a header (`columns`
+        given), the rows above the first row of numbers are preamble, but for those
+        right above it that look like data with a typo (digits and no word, or as
+        many cells as `columns` with a number among them), which are errors too.
         Quoted numbers and CRLF line ends are read as such.
     - *Columns*: `columns` names every column of the file in order with its unit;
         without it, a canonical header (`time_s,force_N,...`) is used, else a header
@@ -125,9 +136,12 @@ def read_test(
 
     `ValueError` naming the file, the 1-based line and the column (its position and
     name) of the first problem: a missing column or cell, a non-numeric, empty, NaN
-    or infinite cell, time not strictly increasing (repeated time stamps included:
-    remove them from the file), a header that names no time and force column, or
-    no `length_mm`.
+    or infinite cell, a value out of range in SI units (`1e306` h), time not
+    strictly increasing in the file's unit or in seconds (repeated time stamps
+    included: remove them from the file), a header that names no time and force
+    column, a numeric metadata value (`length_mm`, `diameter_mm`,
+    `rate_mm_per_min`, `temperature_C`, `breaking_load_N`) that is not a finite
+    number the [`jaxcable.Cable`][] accepts, or no `length_mm`.
     """
     lines = read_lines(path, encoding)
     metadata, first = parse_metadata(lines, path)
@@ -173,9 +187,13 @@ def read_test(
     if spec is None:
         column_map, header_line = header_columns(lines, first, start, sep, path)
         named_by = "the header"
+        if skip_rows is None:
+            start = data_below_header(lines, header_line, start, sep)
     else:
         column_map, header_line = spec, None
         named_by = "columns"
+        if skip_rows is None:
+            start = data_above(lines, first, start, sep, decimal_comma, spec)
     values, line_numbers = parse_rows(
         lines, start, column_map, path, sep, decimal_comma, named_by
     )

@@ -52,9 +52,11 @@ _HEADER_UNITS = {
     },
 }
 _ALL_UNITS = {unit for _, unit in _HEADER_UNITS}
-# `Name (unit)`, `Name [unit]`, also with full-width brackets.
-_BRACKETED_UNIT = re.compile(r"^(.*?)\s*[(\[（【]\s*([^)\]）】]*?)\s*[)\]）】]$")
+# The brackets of `Name (unit)`, `Name [unit]`, also full-width.
+_OPENING = "([（【"
+_CLOSING = ")]）】"
 _NON_NUMBER_WORD = re.compile(r"[^\W\d_]", re.UNICODE)  # any letter
+_WORD = re.compile(r"[^\W\d_]{2,}", re.UNICODE)  # two letters or more in a row
 
 
 def _is_number(cell: str, decimal_comma: bool) -> bool:
@@ -116,9 +118,18 @@ def _looks_like_data(
 
 def _split_unit(cell: str) -> tuple[str, str | None]:
     """`("Force", "kN")` from `Force (kN)`, `Force [kN]`, `Force/kN` or `Force_kN`."""
-    match = _BRACKETED_UNIT.match(cell)
-    if match:
-        return match.group(1).strip(), match.group(2).strip()
+    # By string search rather than a regular expression: the natural pattern
+    # (`(.*?)\s*[(]\s*([^)]*?)\s*[)]$`) backtracks in cubic time on a cell such as
+    # `Remark (` followed by a few thousand spaces.
+    if cell and cell[-1] in _CLOSING:
+        # The unit runs from the first opening bracket after the last closing one
+        # before the end, so that it holds no closing bracket.
+        inner = cell[:-1]
+        last_closing = max(inner.rfind(c) for c in _CLOSING)
+        openings = [inner.find(c, last_closing + 1) for c in _OPENING]
+        opening = min((i for i in openings if i >= 0), default=-1)
+        if opening >= 0:
+            return inner[:opening].strip(), inner[opening + 1 :].strip()
     for mark in ("/", "_", " "):
         if mark in cell:
             name, unit = cell.rsplit(mark, 1)
@@ -196,7 +207,7 @@ def header_columns(
     rows = [
         (index, row_cells(lines[index], sep))
         for index in range(first, start)
-        if lines[index].strip() and not lines[index].lstrip().startswith("#")
+        if _is_content(lines[index])
     ]
     if not rows:
         raise ValueError(
@@ -206,7 +217,7 @@ def header_columns(
     for index, names in rows:
         if any(name in COLUMNS for name in names):
             return map_columns(names, path, index + 1, positions=True), index + 1
-    unit_rows = {index for index, cells in rows if all(map(_unit_cell, cells))}
+    unit_rows = {index for index, cells in rows if _is_units_row(cells)}
     reasons = []
     for k in range(len(rows) - 1, -1, -1):
         index, names = rows[k]
@@ -225,6 +236,15 @@ def header_columns(
     )
 
 
+def _is_content(text: str) -> bool:
+    """Whether a line is neither blank nor a comment."""
+    return bool(text.strip()) and not text.lstrip().startswith("#")
+
+
+def _is_units_row(cells: list[str]) -> bool:
+    return bool(cells) and all(map(_unit_cell, cells))
+
+
 def find_data_start(
     lines: list[str],
     first: int,
@@ -233,10 +253,12 @@ def find_data_start(
     spec: list[ColumnMap] | None,
     path,
 ) -> int:
-    """0-based index of the first data row at or after `first`."""
+    """0-based index of the first row of numbers at or after `first`: a first guess
+    at the data, which `data_below_header` or `data_above` then move up over the
+    rows that are data with a typo."""
     for index in range(first, len(lines)):
         text = lines[index]
-        if not text.strip() or text.lstrip().startswith("#"):
+        if not _is_content(text):
             continue
         if _looks_like_data(row_cells(text, sep), decimal_comma, spec):
             return index
@@ -244,3 +266,62 @@ def find_data_start(
         f"{path}: no data rows found (rows of numbers separated by "
         f"{_SEPARATORS.get(sep, repr(sep))}s)."
     )
+
+
+def data_below_header(lines: list[str], header_line: int, start: int, sep: str) -> int:
+    """0-based index of the first data row under the header on 1-based line
+    `header_line`, the first row of numbers being `lines[start]`.
+
+    Every row under the header is data, but for blank and comment lines and a units
+    row (`s,N,mm`, `(s),(N)`) right under it: a row with a typo (`0,0,N/A`, `O.5`)
+    is then reported by the row parser instead of being skipped as preamble.
+    """
+    for index in range(header_line, start):
+        text = lines[index]
+        if _is_content(text) and not _is_units_row(row_cells(text, sep)):
+            return index
+    return start
+
+
+def _is_data_with_typo(
+    cells: list[str], decimal_comma: bool, spec: list[ColumnMap]
+) -> bool:
+    """Whether a row above the first row of numbers of a file without a header is
+    rather a data row with a typo than preamble.
+
+    Preamble is a units row, or a row without digits, or one with a word (two
+    letters in a row: `Sample 12`, `Ch1`) unless it has as many cells as `spec`
+    and one of the parsed columns reads as a number (`0,0,abc`).
+    """
+    if _is_units_row(cells) or not any(ch.isdigit() for cell in cells for ch in cell):
+        return False
+    if not any(_WORD.search(c) and not _is_number(c, decimal_comma) for c in cells):
+        return True
+    parsed = [i for i, column in enumerate(spec) if column.quantity != IGNORE]
+    return len(cells) == len(spec) and any(
+        _is_number(cells[i], decimal_comma) for i in parsed
+    )
+
+
+def data_above(
+    lines: list[str],
+    first: int,
+    start: int,
+    sep: str,
+    decimal_comma: bool,
+    spec: list[ColumnMap],
+) -> int:
+    """0-based index of the first data row of a file read by `spec` without a header,
+    the first row of numbers being `lines[start]`: the rows right above it (blank
+    lines between them aside) that look like data with a typo are data too, so that
+    the row parser reports them instead of their being skipped as preamble."""
+    for index in range(start - 1, first - 1, -1):
+        text = lines[index]
+        if not text.strip():
+            continue
+        if not _is_content(text):
+            break
+        if not _is_data_with_typo(row_cells(text, sep), decimal_comma, spec):
+            break
+        start = index
+    return start

@@ -48,8 +48,9 @@ class TestData:
     - `extra`: any other columns, by their name in the file, values as in the file
         (not converted); carried through on write.
     - `metadata`: the `# key: value` block. `length_mm`, `diameter_mm`,
-        `rate_mm_per_min` and `temperature_C` are floats in the units their names say;
-        every other key (`material`, `id`, ...) is a string.
+        `rate_mm_per_min`, `temperature_C` and `breaking_load_N` are floats in the
+        units their names say, checked when read; every other key (`material`, `id`,
+        ...) is a string.
     - `source`: the file the data were read from (for error messages), or `None`.
     - `lines`: the 1-based line number of each sample in `source`, or `None`.
     - `mask`: per sample, True where it is to be fitted, False where it is not (a
@@ -149,11 +150,16 @@ class TestData:
                 f"{where(self.source or '<TestData>')}: metadata has no 'length_mm' "
                 "(the free length of the cable, mm)."
             )
-        mm = {
-            key: float(self.metadata[key])
-            for key in _CABLE_KEYS
-            if key in self.metadata
-        }
+        mm = {}
+        for key in _CABLE_KEYS:
+            if key in self.metadata:
+                try:
+                    mm[key] = float(self.metadata[key])
+                except (TypeError, ValueError):
+                    raise ValueError(
+                        f"{where(self.source or '<TestData>')}, metadata '{key}': "
+                        f"{self.metadata[key]!r} is not a number."
+                    ) from None
         if "temperature_C" not in mm and self.temperature is not None:
             mm["temperature_C"] = float(np.mean(self.temperature))
         return Cable.from_mm(**mm)

@@ -3,6 +3,8 @@ and unit each stands for, and the metadata keys read as numbers."""
 
 from typing import NamedTuple
 
+from .._cable import M_PER_MM, ZERO_CELSIUS
+
 
 class Unit(NamedTuple):
     """What a column name stands for.
@@ -33,13 +35,24 @@ _REQUIRED = ("time", "force")
 # The `columns` name of a file column to skip (not parsed).
 IGNORE = "-"
 
-# Metadata keys parsed as numbers, with whether they must be strictly positive. Other
-# keys are kept as strings.
+
+class Bound(NamedTuple):
+    """The values a numeric metadata key may take: those above `minimum` that stay
+    above it in the [`jaxcable.Cable`][]'s SI units, where `(value - minimum) *
+    to_si` is positive (a length of 1e-320 mm is not: it is 0 m)."""
+
+    minimum: float
+    to_si: float
+
+
+# Metadata keys parsed as numbers, with the values the Cable accepts. Other keys are
+# kept as strings.
 NUMERIC_METADATA = {
-    "length_mm": True,
-    "diameter_mm": True,
-    "rate_mm_per_min": True,
-    "temperature_C": False,
+    "length_mm": Bound(0.0, M_PER_MM),
+    "diameter_mm": Bound(0.0, M_PER_MM),
+    "rate_mm_per_min": Bound(0.0, M_PER_MM / 60),
+    "temperature_C": Bound(-ZERO_CELSIUS, 1.0),  # above absolute zero
+    "breaking_load_N": Bound(0.0, 1.0),
 }
 
 
