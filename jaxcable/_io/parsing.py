@@ -21,6 +21,16 @@ from .units import (
 )
 
 
+def _show(cell, limit: int = 40) -> str:
+    """A cell as quoted in an error message, cut to `limit` characters."""
+    text = str(cell)
+    return (
+        repr(text)
+        if len(text) <= limit
+        else repr(text[:limit]) + f"... ({len(text)} characters)"
+    )
+
+
 # Tried in order when no encoding is given. utf-8-sig: spreadsheet programs prepend a
 # byte-order mark. gb18030 (a superset of GBK): Chinese tensile testers' headers.
 # latin-1 decodes any bytes, so a header in an unknown encoding never stops a file
@@ -83,13 +93,13 @@ def metadata_value(key: str, value, place: str) -> float | str:
     if key not in NUMERIC_METADATA:
         return str(value)
     if isinstance(value, bool):
-        raise ValueError(f"{place}: {value!r} is not a number.")
+        raise ValueError(f"{place}: {_show(value)} is not a number.")
     try:
         number = float(value)
     except (TypeError, ValueError):
-        raise ValueError(f"{place}: {str(value)!r} is not a number.") from None
+        raise ValueError(f"{place}: {_show(value)} is not a number.") from None
     if not math.isfinite(number):
-        raise ValueError(f"{place}: {str(value)!r} is not a finite number.")
+        raise ValueError(f"{place}: {_show(value)} is not a finite number.")
     bound = NUMERIC_METADATA[key]
     if number <= bound.minimum:
         what = "positive" if bound.minimum == 0 else f"above {bound.minimum:g}"
@@ -254,7 +264,7 @@ def parse_number(cell: str, decimal_comma: bool) -> float:
     # float() reads `1_5` as 15 (Python's digit grouping), which no tester writes: a
     # typo, to be reported rather than read as a number ten times too large.
     if "_" in cell:
-        raise ValueError(f"{cell!r} is not a number")
+        raise ValueError(f"{_show(cell)} is not a number")
     if decimal_comma:
         cell = cell.replace(",", ".")
     return float(cell)
@@ -319,10 +329,10 @@ def parse_rows(
             try:
                 value = parse_number(cell, decimal_comma)
             except ValueError:
-                what = "empty cell" if not cell else f"{cell!r} is not a number"
+                what = "empty cell" if not cell else f"{_show(cell)} is not a number"
                 raise ValueError(f"{place}: {what}.") from None
             if not math.isfinite(value):
-                raise ValueError(f"{place}: {cell!r} is not a finite number.")
+                raise ValueError(f"{place}: {_show(cell)} is not a finite number.")
             row[position] = value
         rows.append(row)
     return np.asarray(rows, dtype=float), np.asarray(numbers, dtype=int)
