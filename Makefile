@@ -20,8 +20,8 @@ test: $(STAMP)
 	$(BIN)/ruff format --check .
 	# Two processes: late in one long process XLA's CPU compiler crashed (SIGSEGV,
 	# SIGABRT) on a fresh clone; each half alone passes.
-	$(BIN)/pytest -q $(wildcard tests/test_[a-m]*.py)
-	$(BIN)/pytest -q $(wildcard tests/test_[n-z]*.py)
+	$(BIN)/pytest -q --durations=15 $(wildcard tests/test_[a-m]*.py)
+	$(BIN)/pytest -q --durations=15 $(wildcard tests/test_[n-z]*.py)
 
 lint: $(STAMP)
 	$(BIN)/ruff check .
