@@ -135,8 +135,11 @@ def force_noise(force: np.ndarray) -> float:
     """
     if force.size < 3:
         return 0.0
-    d2 = np.diff(force, 2)
-    mad = float(np.median(np.abs(d2 - np.median(d2))))
+    # Forces near the float range overflow here; the estimate is then inf or NaN,
+    # which the slack threshold below ignores (it is capped by the peak force).
+    with np.errstate(over="ignore", invalid="ignore"):
+        d2 = np.diff(force, 2)
+        mad = float(np.median(np.abs(d2 - np.median(d2))))
     return 1.4826 * mad / math.sqrt(6.0)
 
 
@@ -190,7 +193,7 @@ def detect_slack(
         e = np.asarray(elongation, dtype=float)
         # Time is strictly increasing in loaded data; errstate only guards other
         # callers from a warning (their inf rates count as moving).
-        with np.errstate(divide="ignore", invalid="ignore"):
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             rates = np.abs(np.diff(e) / np.diff(t))
         if speed is not None:
             reference = float(speed)
