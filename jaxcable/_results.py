@@ -13,9 +13,19 @@ class RESULTS(eqx.Enumeration):
     successful = ""
     newton_failed = (
         "The Newton solve for a sample's unknown (the loading time of a rate-driven "
-        "test, or the force of an elongation-driven test) did not converge. The cable "
-        "may be unable to follow the protocol: e.g. its creep rate exceeds the "
-        "crosshead strain rate, so the force limit is never reached."
+        "test, or the force of an elongation-driven test) did not converge, although "
+        "the residual does not rule a solution out: a numerical failure. Try a "
+        "solver with more steps (`solver=jaxcable.Newton(tol, max_steps=...)`) or "
+        "finer samples."
+    )
+    unreachable_force = (
+        "A force sample of the rate-driven test cannot be reached at this crosshead "
+        "speed (Park Eq. 6 has no solution at dt >= 0): on a loading ramp the cable "
+        "creeps at least as fast as the crosshead strains it (for Park's model when "
+        "F / (eta0 A) >= v / L0), so the force is never reached; on an unloading "
+        "ramp the model's strain at the lower force is already above the crosshead's. "
+        "This is the physics of the model and parameters, not a solver failure: "
+        "raise the speed, lower the force, or check the parameters."
     )
     nonphysical_time = (
         "A solved loading time was negative or non-finite (Park Eq. 5-6): the force "
@@ -25,7 +35,13 @@ class RESULTS(eqx.Enumeration):
         "A solved force was negative or non-finite, or a force reached the cable's "
         "stiffness scale E1c*A where the hardening law (Park Eq. 1) no longer applies."
     )
-    nonphysical_strain = "The strain became non-finite (inf or NaN)."
+    nonphysical_strain = (
+        "The strain became non-finite (inf or NaN), or a sample's time or force was "
+        "solved at a strain above 1 (the cable at twice its length, beyond the "
+        "breaking strain of any polymer cable and the range where the hardening "
+        "law, Park Eq. 2, lets the strain determine the force): check the "
+        "parameters' units and size."
+    )
     parameter_out_of_domain = (
         "A model parameter is outside its domain: e.g. the long-term retardation time "
         "t_r2 = lambda1 / strain_rate**2 - lambda2 (Park Eq. 8) is not positive for "

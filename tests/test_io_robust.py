@@ -85,6 +85,8 @@ def test_typo_above_first_row_without_header_is_an_error(tmp_path):
         ("O.5,0,0", "time_s"),
         ("0,0,abc", "elongation_mm"),
         ("0.5", "force_N"),
+        ("N/A,N/A,N/A", "time_s"),
+        ("nan,-,n/a", "time_s"),
     ]:
         path = _write(tmp_path, f"Test report\n{first}\n\n1,1,1\n2,2,2\n")
         _error(path, 2, column, **kwargs)

@@ -16,15 +16,29 @@ from jaxtyping import Array, Bool, Float, Int
 
 from .._cable import Cable
 from .._models import AbstractCableModel, StrainParts
+from .._results import RESULTS
 from .newton import Newton, root_scalar
 from .protocol import Protocol
 from .scan import SOLUTION, AbstractDrive, AbstractSample
-from .state import CableState, commit, direction, init_state, sample_result
+from .state import (
+    CableState,
+    commit,
+    direction,
+    init_state,
+    sample_result,
+    solved_result,
+)
 
 
 # Residuals are relative strain errors, with this floor on the strain scale so that a
 # nearly unloaded cable is solved to an absolute strain accuracy of floor * tol.
 _STRAIN_FLOOR = 1e-4
+
+
+def _active(state: CableState, sample: AbstractSample) -> Bool[Array, ""]:
+    """Whether a sample's solve matters: not padding, and no failure before it (the
+    first failure is what a simulation reports)."""
+    return sample.mask & (state.result == RESULTS.successful)
 
 
 def default_solver(dtype) -> Newton:
@@ -175,7 +189,7 @@ class RateDrive(AbstractDrive):
         target = state.strain + sign * cable.strain_rate * guess
         scale = jnp.abs(state.strain) + jnp.abs(target) + _STRAIN_FLOOR
         problem = _TimeProblem(model, cable, state, force, branch, duration, scale)
-        dt, converged = root_scalar(
+        root = root_scalar(
             _time_residual,
             self.solver,
             guess,
@@ -183,10 +197,14 @@ class RateDrive(AbstractDrive):
             jnp.zeros_like(guess),
             slope_sign=slope_sign,
             growth=1e-6 / cable.strain_rate,
+            active=_active(state, sample),
         )
-        dt = checkpoint_name(dt, SOLUTION)
-        result = sample_result(converged=converged, dt=dt)
+        dt = checkpoint_name(root.value, SOLUTION)
+        result = sample_result(
+            converged=root.converged, unreachable=root.no_root, dt=dt
+        )
         model_state, parts = model.advance(state.model_state, cable, dt, force, branch)
+        result = solved_result(result, parts.total)
         return commit(
             state, model_state, parts, state.time + dt, force, result, sample.mask
         )
@@ -239,7 +257,10 @@ class ElongationDrive(AbstractDrive):
         branch = direction(target - state.strain)
         problem = _ForceProblem(model, cable, state, dt, target, branch)
         # Slack: an imposed length below the zero-force length leaves the cable
-        # unloaded.
+        # unloaded. Where the strain is not monotone in the force (a creep or
+        # recovery term that moves with it), a length can be both below the
+        # zero-force length and reached at a force > 0: the root that continues the
+        # history (Newton's, from the previous force) wins over slack.
         zero = jnp.zeros_like(target)
         slack = _force_residual(zero, problem) >= 0
         # Initial guess from the local compliance at the previous force (Newton's
@@ -255,7 +276,7 @@ class ElongationDrive(AbstractDrive):
             cable.breaking_load,
         )
         # Strain rises with force; a flat slope (0 N under hardening) grows the force.
-        solved, converged = root_scalar(
+        root = root_scalar(
             _force_residual,
             self.solver,
             guess,
@@ -263,10 +284,13 @@ class ElongationDrive(AbstractDrive):
             zero,
             slope_sign=jnp.ones_like(guess),
             growth=1e-6 * cable.breaking_load,
+            active=_active(state, sample),
         )
-        force = checkpoint_name(jnp.where(slack, zero, solved), SOLUTION)
-        result = sample_result(converged=slack | converged, force=force)
+        force = jnp.where(slack & ~root.converged, zero, root.value)
+        force = checkpoint_name(force, SOLUTION)
+        result = sample_result(converged=slack | root.converged, force=force)
         model_state, parts = model.advance(state.model_state, cable, dt, force, branch)
+        result = solved_result(result, parts.total)
         return commit(
             state, model_state, parts, sample.time, force, result, sample.mask
         )

@@ -108,16 +108,22 @@ def direction(delta: Float[Array, ""]) -> Int[Array, ""]:
 def sample_result(
     *,
     converged: Bool[Array, ""] | None = None,
+    unreachable: Bool[Array, ""] | None = None,
     dt: Float[Array, ""] | None = None,
     force: Float[Array, ""] | None = None,
 ) -> RESULTS:
-    """The result of one sample: `newton_failed` unless its solve `converged`, then
+    """The result of one sample: `newton_failed` unless its solve `converged` (or
+    `unreachable_force` where the failed solve showed the sample `unreachable`), then
     `nonphysical_time` unless `dt` is finite and >= 0, then `nonphysical_force` unless
     `force` is finite and >= 0 (the later check's failure wins); each check only
     where its argument is given."""
     result = RESULTS.successful
     if converged is not None:
         result = RESULTS.where(converged, RESULTS.successful, RESULTS.newton_failed)
+        if unreachable is not None:
+            result = RESULTS.where(
+                ~converged & unreachable, RESULTS.unreachable_force, result
+            )
     if dt is not None:
         ok = (dt >= 0) & jnp.isfinite(dt)
         result = RESULTS.where(ok, result, RESULTS.nonphysical_time)
@@ -125,6 +131,24 @@ def sample_result(
         ok = (force >= 0) & jnp.isfinite(force)
         result = RESULTS.where(ok, result, RESULTS.nonphysical_force)
     return result
+
+
+# The largest strain at which a sample's time or force is solved: a cable twice its
+# length. No polymer cable comes near it (UHMWPE breaks at about 0.035, polyester at
+# 0.15, nylon at 0.4), and beyond it the hardening law (Park Eq. 2,
+# h = 1 + beta eps**gamma, eps**gamma unbounded in gamma) makes the strain almost
+# independent of the force, so that a solved force or time would be one of many. A
+# force history, which is not inverted, is simulated at any strain.
+MAX_SOLVED_STRAIN = 1.0
+
+
+def solved_result(result: RESULTS, strain: Float[Array, ""]) -> RESULTS:
+    """`result` of a solved sample, or `nonphysical_strain` where it was successful
+    but its strain is beyond `MAX_SOLVED_STRAIN`."""
+    ok = (jnp.abs(strain) <= MAX_SOLVED_STRAIN) | ~jnp.isfinite(strain)
+    return RESULTS.where(
+        ok | (result != RESULTS.successful), result, RESULTS.nonphysical_strain
+    )
 
 
 def _select(pred, new, old):

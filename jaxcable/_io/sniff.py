@@ -57,6 +57,9 @@ _OPENING = "([（【"
 _CLOSING = ")]）】"
 _NON_NUMBER_WORD = re.compile(r"[^\W\d_]", re.UNICODE)  # any letter
 _WORD = re.compile(r"[^\W\d_]{2,}", re.UNICODE)  # two letters or more in a row
+# What instruments write for a missing value (a whole row of these is a data row
+# with no values, not preamble). Anchored, no nested repetition: linear time.
+_MISSING = re.compile(r"(?:n/?a|nan|null|none|-+|\?+)", re.IGNORECASE)
 
 
 def _is_number(cell: str, decimal_comma: bool) -> bool:
@@ -289,10 +292,13 @@ def _is_data_with_typo(
     """Whether a row above the first row of numbers of a file without a header is
     rather a data row with a typo than preamble.
 
-    Preamble is a units row, or a row without digits, or one with a word (two
-    letters in a row: `Sample 12`, `Ch1`) unless it has as many cells as `spec`
-    and one of the parsed columns reads as a number (`0,0,abc`).
+    A row of as many cells as `spec`, each a missing-value marker (`N/A,N/A,N/A`,
+    `nan`, `-`), is data. Preamble is a units row, or a row without digits, or one
+    with a word (two letters in a row: `Sample 12`, `Ch1`) unless it has as many
+    cells as `spec` and one of the parsed columns reads as a number (`0,0,abc`).
     """
+    if len(cells) == len(spec) and all(_MISSING.fullmatch(c.strip()) for c in cells):
+        return True
     if _is_units_row(cells) or not any(ch.isdigit() for cell in cells for ch in cell):
         return False
     if not any(_WORD.search(c) and not _is_number(c, decimal_comma) for c in cells):
