@@ -24,7 +24,9 @@ one, is counted as misclassified.
     python scripts/sweep_draws.py --draws 100000 --out sweep.json
 
 Prints a JSON summary and a table; exits 1 if a value is non-finite without a
-failure status, or a failure is misclassified.
+failure status, a failure is misclassified, or the elongation history of a
+successful rate test gives other forces (by more than 1e-6 of the peak) without a
+failure status.
 """
 
 import argparse
@@ -207,7 +209,18 @@ def main(argv=None):
                 o["force_strain_err"][rate_ok].max(initial=0.0)
             ),
             elongation_history_max_force_error_rel=float(
-                o["elongation_force_err"][rate_ok].max(initial=0.0)
+                o["elongation_force_err"][rate_ok & (o["elongation"] == 0)].max(
+                    initial=0.0
+                )
+            ),
+            # Successful both ways, yet forces apart by more than 1e-6 of the peak:
+            # a silently different answer from another entry point.
+            elongation_history_disagreements=int(
+                np.sum(
+                    rate_ok
+                    & (o["elongation"] == 0)
+                    & (o["elongation_force_err"] > 1e-6)
+                )
             ),
         ),
     )
@@ -221,7 +234,11 @@ def main(argv=None):
     if args.out:
         with open(args.out, "w") as f:
             json.dump(summary, f, indent=2)
-    bad = sum(silent.values()) + sum(summary["misclassified"].values())
+    bad = (
+        sum(silent.values())
+        + sum(summary["misclassified"].values())
+        + summary["on_successful_rate_tests"]["elongation_history_disagreements"]
+    )
     return 1 if bad else 0
 
 

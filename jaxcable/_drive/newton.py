@@ -267,10 +267,11 @@ def root_scalar(
             y_new = jnp.where(ok, y - step, y)
         else:
             ok = ok & (slope * slope_sign > 0)
-            # The growth is for iterates far from the root: one that has converged
-            # (at a kink, say, where the slope has the other sign) stays.
-            grow = jnp.where(jnp.abs(r) <= solver.tol, y, 2 * y + growth)
-            y_new = jnp.where(ok, y - step, grow)
+            y_new = jnp.where(ok, y - step, 2 * y + growth)
+        # An iterate that has converged is the answer: a further step is no
+        # refinement where the slope is nearly flat (at 0 N under hardening, a slope
+        # of 1e-18 turns a residual of 1e-13 into a step of 1e5 N).
+        y_new = jnp.where(jnp.abs(r) <= solver.tol, y, y_new)
         return jnp.maximum(y_new, lower), r
 
     def advance(state: _NewtonState, f) -> _NewtonState:
