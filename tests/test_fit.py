@@ -11,6 +11,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+import optimistix as optx
 import pytest
 
 import jaxcable as jc
@@ -397,3 +398,32 @@ def test_bad_tests_raise_value_error():
     with pytest.raises(ValueError, match="PaddedTests"):
         p, static = eqx.partition(jc.HookeModel(), eqx.is_inexact_array)
         jc.residuals(p, static, [good])
+
+
+def test_early_stop_keeps_the_minimum():
+    """The default solver stops before evaluating a proposal that would pass the
+    convergence test: one evaluation fewer than optimistix's own step, and the same
+    minimum within the tolerance."""
+    from jaxcable._fit.solver import LevenbergMarquardt
+
+    class Plain(LevenbergMarquardt):
+        def step(self, fn, y, args, options, state, tags):
+            return optx.AbstractGaussNewton.step(
+                self, fn, y, args, options, state, tags
+            )
+
+    true, names, _ = _CASES["burgers"]
+    start = _perturbed(true, names, (1.3, 0.7, 1.4, 0.8))
+    tests = _tests(true)
+    early, _ = _fit_quietly(start, tests, fit=names, multistart=1)
+    plain, _ = _fit_quietly(
+        start,
+        tests,
+        fit=names,
+        multistart=1,
+        solver=Plain(rtol=1e-6, atol=1e-6),
+    )
+    assert early.converged and plain.converged
+    assert early.num_steps < plain.num_steps
+    np.testing.assert_allclose(early.values, plain.values, rtol=1e-5)
+    np.testing.assert_allclose(early.loss, plain.loss, rtol=1e-9)

@@ -44,6 +44,33 @@ class LevenbergMarquardt(optx.AbstractGaussNewton):
     )
     verbose: Callable = lambda **kwargs: None
 
+    def step(self, fn, y, args, options, state, tags):
+        """optimistix's Gauss-Newton step, which also stops before evaluating a
+        proposal that would pass its own convergence test.
+
+        optimistix tests convergence (`optx.cauchy_termination`: the change of y and
+        of the residuals both below atol + rtol |.|) on a step already taken, so a
+        converged solve paid one more residual-and-Jacobian evaluation (about 2.5
+        forward simulations) only to confirm it: 10-30 % of the fits' steps. Here the
+        same test is also applied, right after a step is accepted, to the next
+        proposal: its y change and its residuals' change as predicted by the
+        Jacobian just computed (J dy). When both are below tolerance the solve stops
+        at the accepted point, which is then the solution and where the returned
+        residuals and Jacobian were evaluated. The proposal's damping is then at most
+        that of the accepted step, so a small proposal is a small Gauss-Newton step,
+        not a step shrunk by a rejection.
+        """
+        y, new, aux = super().step(fn, y, args, options, state, tags)
+        accepted = new.num_steps_since_acceptance == 0
+        # The fit's y and residuals are flat arrays.
+        f = new.f_info.residual
+        dy = new.y_eval - y
+        df = new.f_info.jac.mv(dy)
+        small_y = self.norm(jnp.abs(dy) / (self.atol + self.rtol * jnp.abs(y))) < 1
+        small_f = self.norm(jnp.abs(df) / (self.atol + self.rtol * jnp.abs(f))) < 1
+        stop = accepted & small_y & small_f & jnp.all(jnp.isfinite(f))
+        return y, eqx.tree_at(lambda s: s.terminate, new, new.terminate | stop), aux
+
 
 # The solver's residuals are r / sqrt(_DAMPING * sum(e_measured^2)). A modulus that
 # carries all the elongation has |dr / dlog E|^2 ~ sum(e^2), the largest curvature
@@ -95,6 +122,48 @@ def _scaled_residual_fn(problem: Problem, jac: Literal["fwd", "bwd"], scale):
         return r / scale, (jacobian @ du) / scale
 
     return lambda u, args: scaled(u)
+
+
+def solve(
+    problem: Problem,
+    u0: Float[Array, " p"],
+    solver: optx.AbstractGaussNewton,
+    max_steps: int,
+    jac: Literal["fwd", "bwd"],
+) -> tuple[
+    Float[Array, " p"],
+    optx.RESULTS,
+    Float[Array, ""],
+    Float[Array, " residuals"],
+    Float[Array, "residuals p"],
+]:
+    """One least-squares solve from `u0` (traceable; `fit_kernel` maps it over the
+    starts, `benchmarks/fit.py` times it alone).
+
+    **Arguments:**
+
+    - `problem`: the least-squares problem.
+    - `u0`: the start in u.
+    - `solver`: an optimistix Gauss-Newton-type solver.
+    - `max_steps`: solver steps.
+    - `jac`: the Jacobian's mode, `"fwd"` or `"bwd"`.
+
+    **Returns:**
+
+    `(u, result, steps, residuals, jacobian)`: the solution, the solver's result, its
+    steps, and the flat residuals (m) and their Jacobian in u at the solution.
+    """
+    data = problem.data
+    scale = jnp.sqrt(_DAMPING * jnp.sum((data.elongation * data.weight) ** 2))
+    fn = _scaled_residual_fn(problem, jac, scale)
+    sol = optx.least_squares(fn, solver, u0, max_steps=max_steps, throw=False)
+    # A Gauss-Newton-type solver's state holds the residuals and the linearised
+    # residual function at the returned (last accepted) point; with the rule of
+    # `_scaled_residual_fn` its matrix is the Jacobian, with no further scan.
+    f_info = sol.state.f_info
+    r = f_info.residual * scale
+    jacobian = f_info.jac.as_matrix() * scale
+    return sol.value, sol.result, sol.stats["num_steps"], r, jacobian
 
 
 class _SecantCarry(eqx.Module):
@@ -225,22 +294,11 @@ def fit_kernel(
     noise = spread * jr.normal(key, (num_starts - 1, problem.layout.size), u_user.dtype)
     starts = jnp.concatenate([u_start[None], u_start[None] + noise])
     data = problem.data
-    scale = jnp.sqrt(_DAMPING * jnp.sum((data.elongation * data.weight) ** 2))
-    fn = _scaled_residual_fn(problem, jac, scale)
-
-    def solve(u0):
-        sol = optx.least_squares(fn, solver, u0, max_steps=max_steps, throw=False)
-        # A Gauss-Newton-type solver's state holds the residuals and the linearised
-        # residual function at the returned (last accepted) point; with the rule of
-        # `_scaled_residual_fn` its matrix is the Jacobian, with no further scan.
-        f_info = sol.state.f_info
-        r = f_info.residual * scale
-        jacobian = f_info.jac.as_matrix() * scale
-        return sol.value, sol.result, sol.stats["num_steps"], r, jacobian
-
     # One start after the other: a vmapped solve compiles about twice as slowly, and
     # on a CPU the few starts gain little from batching.
-    values, results, steps, r, jacobian = jax.lax.map(solve, starts)
+    values, results, steps, r, jacobian = jax.lax.map(
+        lambda u0: solve(problem, u0, solver, max_steps, jac), starts
+    )
     ssr = jnp.sum(r**2, axis=1)
     ssr = jnp.where(jnp.isfinite(ssr), ssr, jnp.inf)
     converged = (results == optx.RESULTS.successful) & jnp.isfinite(ssr)
