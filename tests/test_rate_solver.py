@@ -64,3 +64,47 @@ def test_unloading_with_strong_short_recovery_converges():
     np.testing.assert_allclose(
         d_strain, cable.strain_rate * d_time, rtol=1e-8, atol=1e-14
     )
+
+
+def test_fallback_lanes_under_vmap_match_single_solves():
+    # The bracket search and the bisection share one loop in which each lane goes
+    # through its own phases: under vmap, a lane that Newton's method solves, one it
+    # fails on that has a root (search, then bisection), one without a root and an
+    # inactive one must each get what they get alone.
+    import jax
+    import jax.numpy as jnp
+
+    from jaxcable._drive.newton import Newton, root_scalar
+
+    def fn(y, c):
+        # A root at y = c along a rising tanh, flat far from it: Newton's steps
+        # overshoot from far away; c < 0 puts the root below `lower` (no root).
+        return jnp.tanh(4.0 * (y - c))
+
+    solver = Newton(tol=1e-6, max_steps=3)
+
+    def solve(guess, c, active):
+        r = root_scalar(
+            fn,
+            solver,
+            guess,
+            c,
+            jnp.zeros_like(guess),
+            slope_sign=jnp.ones_like(guess),
+            growth=jnp.asarray(1e-3),
+            active=active,
+        )
+        return r.value, r.converged, r.no_root
+
+    guess = jnp.array([1.01, 30.0, 0.5, 30.0])
+    c = jnp.array([1.0, 7.0, -1.0, 7.0])
+    active = jnp.array([True, True, True, False])
+    batched = jax.vmap(solve)(guess, c, active)
+    for i in range(4):
+        single = solve(guess[i], c[i], active[i])
+        for b, s in zip(batched, single):
+            np.testing.assert_array_equal(np.asarray(b[i]), np.asarray(s))
+    value, converged, no_root = (np.asarray(x) for x in batched)
+    assert converged[:2].all() and not converged[2:].any()
+    np.testing.assert_allclose(value[:2], [1.0, 7.0], atol=1e-5)
+    assert no_root[2] and not no_root[[0, 1, 3]].any()

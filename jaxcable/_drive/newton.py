@@ -138,64 +138,30 @@ class _Bracket(eqx.Module):
         return 0.5 * (self.left + self.right)
 
 
-class _NewtonState(eqx.Module):
-    """The carry of `root_scalar`'s Newton loop: the next iterate `y`, the residual
-    at the previous one (|residual| <= tol: converged), the bracket of all points
-    evaluated, whether the iterate is `stuck` at `lower`, and the steps taken."""
+# The phases of a lane in `root_scalar`'s loop: Newton's method, then, only where it
+# failed, the bracket search (`_SEARCH`) and bisection, then done.
+_NEWTON, _SEARCH, _BISECT, _DONE = 0, 1, 2, 3
+
+
+class _SolveState(eqx.Module):
+    """The carry of `root_scalar`'s loop, one lane.
+
+    Newton's method: the next iterate `y`, the residual at the previous one
+    (|residual| <= tol: converged), whether the iterate is `stuck` at `lower`, and
+    the Newton `steps` taken. The fallback: the step `k` of the bracket search or of
+    the bisection, and the last point that it evaluated (`y_end`, with residual
+    `r_end`). Both: the `bracket` of all points evaluated and the lane's `phase`.
+    """
 
     y: Float[Array, ""]
     residual: Float[Array, ""]
     bracket: _Bracket
     stuck: Bool[Array, ""]
     steps: Int[Array, ""] | int
-
-
-class _SearchState(eqx.Module):
-    """The carry of `_search` and `_bisect`: the bracket, the last point evaluated
-    and its residual, and the steps taken."""
-
-    bracket: _Bracket
-    y: Float[Array, ""]
-    residual: Float[Array, ""]
-    steps: Int[Array, ""] | int
-
-
-def _search(f, bracket: _Bracket, lower, growth, searching):
-    """Look for a bracket where Newton's iterates found none: fn at lower +
-    growth (2**k - 1), k = 0, 1, ..., up to 2**_SEARCH_STEPS growths, in the lanes
-    `searching`. Only a solve that failed gets here, so a verdict of no root rests
-    on this scan and not only on where Newton's method happened to step."""
-
-    def cond(c: _SearchState):
-        return (c.steps <= _SEARCH_STEPS) & searching & ~c.bracket.found
-
-    def body(c: _SearchState):
-        y = lower + growth * (2.0**c.steps - 1.0)
-        r = f(y)
-        return _SearchState(c.bracket.see(y, r), y, r, c.steps + 1)
-
-    inf = jnp.full_like(bracket.left, jnp.inf)
-    init = _SearchState(bracket, inf, inf, jnp.array(0))
-    return jax.lax.while_loop(cond, body, init).bracket
-
-
-def _bisect(f, bracket: _Bracket, tol: float, bisecting):
-    """Bisection on a bracket in the lanes `bisecting`: it converges wherever a
-    crossing was bracketed, whatever the shape of fn."""
-
-    def cond(c: _SearchState):
-        converged = jnp.abs(c.residual) <= tol
-        return (c.steps < _BISECTION_STEPS) & bisecting & c.bracket.found & ~converged
-
-    def body(c: _SearchState):
-        y = c.bracket.midpoint()
-        r = f(y)
-        return _SearchState(c.bracket.see(y, r), y, r, c.steps + 1)
-
-    y0 = bracket.midpoint()
-    init = _SearchState(bracket, y0, jnp.full_like(y0, jnp.inf), jnp.array(0))
-    end = jax.lax.while_loop(cond, body, init)
-    return end.y, jnp.abs(end.residual) <= tol
+    phase: Int[Array, ""]
+    k: Int[Array, ""]
+    y_end: Float[Array, ""]
+    r_end: Float[Array, ""]
 
 
 def root_scalar(
@@ -222,12 +188,13 @@ def root_scalar(
     Every residual evaluated updates a bracket of the wanted root (`_Bracket`: a
     crossing in the direction of `slope_sign`). Where Newton's method has not
     converged in `max_steps`, fn is scanned for a bracket if its iterates found
-    none (`_search`: from `lower` up to 2**60 `growth`), and the solve is finished
+    none (a scan from `lower` up to 2**60 `growth`), and the solve is finished
     by bisection on the bracket. Where the scan finds none either,
     `RootResult.no_root` is set: a problem without a root (e.g. a force that creep
     keeps out of reach), not a solver failure. `scripts/sweep_draws.py` checks the
-    verdict on 10^5 random cables against a denser scan of the residual. None of
-    this costs anything on a solve that converges.
+    verdict on 10^5 random cables against a denser scan of the residual. The search
+    and the bisection share one loop after Newton's, which a batch whose solves all
+    converged enters for one predicate only.
 
     `active` (default: all) marks the lanes to solve: a lane that is not active
     (a cable that has already failed, under `vmap`) takes the unrolled steps only,
@@ -257,8 +224,11 @@ def root_scalar(
             f"{type(solver).__name__}."
         )
 
-    def newton_step(f, y):
-        r, slope = jax.jvp(f, (y,), (jnp.ones_like(y),))
+    tol = solver.tol
+    live = jnp.ones_like(guess, dtype=bool) if active is None else active
+
+    def newton_step(y, r, slope):
+        # The next iterate from the residual `r` and the `slope` at `y`.
         step = r / jnp.where(slope == 0, 1.0, slope)
         ok = (slope != 0) & jnp.isfinite(step)
         if slope_sign is None:
@@ -271,50 +241,95 @@ def root_scalar(
         # An iterate that has converged is the answer: a further step is no
         # refinement where the slope is nearly flat (at 0 N under hardening, a slope
         # of 1e-18 turns a residual of 1e-13 into a step of 1e5 N).
-        y_new = jnp.where(jnp.abs(r) <= solver.tol, y, y_new)
-        return jnp.maximum(y_new, lower), r
-
-    def advance(state: _NewtonState, f) -> _NewtonState:
-        y, r = newton_step(f, state.y)
+        y_new = jnp.where(jnp.abs(r) <= tol, y, y_new)
+        y_new = jnp.maximum(y_new, lower)
         # At `lower` and already past the root (or, without `slope_sign`, stepping
         # below `lower` again), the root is below `lower`: stop instead of
         # repeating the step.
         if slope_sign is None:
-            stuck = (state.y <= lower) & (y <= lower)
+            stuck = (y <= lower) & (y_new <= lower)
         else:
-            stuck = (state.y <= lower) & (r * slope_sign > 0)
-        return _NewtonState(
-            y=y,
-            residual=r,
-            bracket=state.bracket.see(state.y, r),
-            stuck=stuck,
-            steps=state.steps + 1,
+            stuck = (y <= lower) & (r * slope_sign > 0)
+        return y_new, stuck
+
+    def newton_on(s: _SolveState):
+        done = (jnp.abs(s.residual) <= tol) | s.stuck
+        return (s.steps < solver.max_steps) & live & ~done
+
+    def newton(s: _SolveState, f) -> _SolveState:
+        r, slope = jax.jvp(f, (s.y,), (jnp.ones_like(s.y),))
+        y, stuck = newton_step(s.y, r, slope)
+        bracket = s.bracket.see(s.y, r)
+        return eqx.tree_at(
+            lambda s: (s.y, s.residual, s.bracket, s.stuck, s.steps),
+            s,
+            (y, r, bracket, stuck, s.steps + 1),
         )
 
-    live = jnp.ones_like(guess, dtype=bool) if active is None else active
+    def settle(s: _SolveState) -> _SolveState:
+        # Move each lane of the fallback on to its next phase once its current one
+        # is over (possibly through both at once): the search ends with a bracket or
+        # after `_SEARCH_STEPS`; bisection converged, out of steps, or at once where
+        # no bracket was found (no root).
+        phase, k, r_end = s.phase, s.k, s.r_end
+        if growth is None:
+            leave = phase == _SEARCH
+        else:
+            searching = (k <= _SEARCH_STEPS) & ~s.bracket.found
+            leave = (phase == _SEARCH) & ~searching
+        phase = jnp.where(leave, _BISECT, phase)
+        k = jnp.where(leave, 0, k)
+        r_end = jnp.where(leave, jnp.inf, r_end)
+        bisecting = (k < _BISECTION_STEPS) & s.bracket.found & ~(jnp.abs(r_end) <= tol)
+        phase = jnp.where((phase == _BISECT) & ~bisecting, _DONE, phase)
+        return eqx.tree_at(lambda s: (s.phase, s.k, s.r_end), s, (phase, k, r_end))
+
+    def fallback(s: _SolveState, f) -> _SolveState:
+        # One evaluation of fn in each lane: at the search's next point
+        # (lower + growth (2**k - 1), up to 2**_SEARCH_STEPS growths: a verdict of
+        # no root rests on this scan, not only on where Newton's method happened to
+        # step) or at the bracket's midpoint.
+        y = s.bracket.midpoint()
+        if growth is not None:
+            # 2**k in the iterate's dtype: under x64, a float32 solve would
+            # otherwise get float64 iterates (2.0**k of an int is float64 there).
+            y_search = lower + growth * ((2.0**s.k).astype(y.dtype) - 1.0)
+            y = jnp.where(s.phase == _SEARCH, y_search, y)
+        r = f(y)
+        s = eqx.tree_at(
+            lambda s: (s.bracket, s.k, s.y_end, s.r_end),
+            s,
+            (s.bracket.see(y, r), s.k + 1, y, r),
+        )
+        return settle(s)
 
     def solve(f, y0):
+        # The first `unrolled` Newton steps, Newton's loop, then one loop for the
+        # search and the bisection of the lanes that Newton's method left
+        # unconverged: one loop instead of two costs a batch whose solves all
+        # converge one predicate (and its carry) less per sample.
         inf = jnp.full_like(y0, jnp.inf)
         no = jnp.zeros_like(y0, dtype=bool)
-        state = _NewtonState(y0, inf, _Bracket.empty(y0, slope_sign), no, 0)
+        zero = jnp.zeros_like(y0, dtype=jnp.int32)
+        bracket = _Bracket.empty(y0, slope_sign)
+        state = _SolveState(y0, inf, bracket, no, 0, zero, zero, y0, inf)
         for _ in range(solver.unrolled):
-            state = advance(state, f)
-
-        def cond(state):
-            done = (jnp.abs(state.residual) <= solver.tol) | state.stuck
-            return (state.steps < solver.max_steps) & live & ~done
-
-        state = jax.lax.while_loop(cond, lambda s: advance(s, f), state)
+            state = newton(state, f)
+        state = jax.lax.while_loop(newton_on, lambda s: newton(s, f), state)
         y, bracket = state.y, state.bracket
-        ok = (jnp.abs(state.residual) <= solver.tol) & jnp.isfinite(y)
-        # Only the lanes Newton's method left unconverged search and bisect.
+        ok = (jnp.abs(state.residual) <= tol) & jnp.isfinite(y)
         failed = live & ~ok
-        if growth is not None:
-            bracket = _search(f, bracket, lower, growth, failed)
-        y_bisect, ok_bisect = _bisect(f, bracket, solver.tol, failed)
-        no_root = failed & ~bracket.found
-        y = jnp.where(failed & bracket.found, y_bisect, y)
-        ok = ok | (failed & ok_bisect)
+        state = eqx.tree_at(
+            lambda s: s.phase, state, jnp.where(failed, _SEARCH, _DONE) + zero
+        )
+        state = jax.lax.while_loop(
+            lambda s: s.phase != _DONE, lambda s: fallback(s, f), settle(state)
+        )
+        no_root = failed & ~state.bracket.found
+        # A lane with a bracket has bisected it (at least one step).
+        bisected = failed & state.bracket.found
+        y = jnp.where(bisected, state.y_end, y)
+        ok = ok | (bisected & (jnp.abs(state.r_end) <= tol))
         # Float flags: custom_root gives aux a tangent, which a bool cannot have.
         return y, (ok.astype(y.dtype), no_root.astype(y.dtype))
 
