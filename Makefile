@@ -3,6 +3,7 @@ PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
+WORKERS ?= 2
 
 .PHONY: demo test lint format bench clean
 
@@ -18,10 +19,11 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
-	# Two processes: late in one long process XLA's CPU compiler crashed (SIGSEGV,
-	# SIGABRT) on a fresh clone; each half alone passes.
-	$(BIN)/pytest -q --durations=15 $(wildcard tests/test_[a-m]*.py)
-	$(BIN)/pytest -q --durations=15 $(wildcard tests/test_[n-z]*.py)
+	# Two worker processes (pytest-xdist) share the cores, one file (or notebook) at a
+	# time each, the slowest first (tests/conftest.py), and one compilation cache. Two
+	# processes also because late in one long process XLA's CPU compiler crashed
+	# (SIGSEGV, SIGABRT) on a fresh clone; each half of the suite alone passes.
+	$(BIN)/pytest -q --durations=25 -n $(WORKERS) --dist loadgroup tests
 
 lint: $(STAMP)
 	$(BIN)/ruff check .

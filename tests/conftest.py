@@ -1,5 +1,8 @@
+import atexit
 import os
 import pathlib
+import shutil
+import tempfile
 
 
 # The command line keeps compiled programs in a per-user cache; the suite runs the
@@ -7,16 +10,49 @@ import pathlib
 # tests/test_cache.py checks the cache itself, in fresh interpreters.
 os.environ["JAXCABLE_NO_CACHE"] = "1"
 
+# One compilation cache for the whole run, in a fresh folder: many tests (and the
+# xdist workers, and the notebooks' kernels) compile the same kernels, and loading a
+# program from disk takes a fraction of compiling it again. The first process of the
+# run (plain pytest, or xdist's controller) makes the folder and deletes it at exit;
+# the workers it starts inherit the variable. A fresh folder per run, so that a run
+# never depends on what an earlier one left. JAXCABLE_TEST_JAX_CACHE=off turns it off.
+TEST_CACHE_ENV = "JAXCABLE_TEST_JAX_CACHE"
+if TEST_CACHE_ENV not in os.environ:
+    _folder = tempfile.mkdtemp(prefix="jaxcable-test-cache-")
+    os.environ[TEST_CACHE_ENV] = _folder
+    atexit.register(shutil.rmtree, _folder, ignore_errors=True)
+TEST_CACHE = (
+    None
+    if os.environ[TEST_CACHE_ENV] == "off"
+    else pathlib.Path(os.environ[TEST_CACHE_ENV])
+)
+
 import jax  # noqa: E402
 import pytest  # noqa: E402
 
 
 jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_numpy_dtype_promotion", "standard")
+if TEST_CACHE is not None:
+    jax.config.update("jax_compilation_cache_dir", str(TEST_CACHE))
+    # Every program: the suite's many small kernels add up.
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 SHARED = pathlib.Path(os.environ.get("JAXCABLE_SHARED", ROOT.parent / "shared"))
 DATA = SHARED / "data"
+
+
+@pytest.fixture(scope="session")
+def jax_cache_env() -> dict[str, str]:
+    """Environment variables that point a child interpreter (a notebook's kernel) at
+    the run's compilation cache; empty when the cache is off."""
+    if TEST_CACHE is None:
+        return {}
+    return {
+        "JAX_COMPILATION_CACHE_DIR": str(TEST_CACHE),
+        "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS": "0",
+    }
 
 
 @pytest.fixture
@@ -25,3 +61,39 @@ def shared_data():
     if not DATA.is_dir():
         pytest.skip(f"shared data not found at {DATA} (only developers and CI have it)")
     return DATA
+
+
+# `make test` runs the suite in two xdist workers (--dist loadgroup), each taking one
+# group at a time in this order: the slowest groups first, so that neither worker is
+# left with a long one at the end while the other idles. A group is a file (its
+# module-scoped fixtures and compiled kernels stay in one process), except that each
+# notebook is its own group (each runs in its own kernel anyway). Seconds alone on a
+# 2-core machine, from `--durations`; update the list when a file grows slow.
+SLOW_FIRST = (
+    "tests/test_notebooks.py::test_notebook_runs[03_diagnose.ipynb]",  # 109 s
+    "tests/test_diagnose.py",  # 150 s
+    "tests/test_cli.py",  # 120 s
+    "tests/test_cdpr.py",
+    "tests/test_notebooks.py::test_notebook_runs[05_cdpr.ipynb]",  # 33 s
+    "tests/test_notebooks.py::test_notebook_runs[02_fit.ipynb]",  # 30 s
+    "tests/test_notebooks.py::test_notebook_runs[01_papers.ipynb]",  # 25 s
+    "tests/test_long_histories.py",
+)
+
+
+def _rank(item: pytest.Item) -> int:
+    for rank, prefix in enumerate(SLOW_FIRST):
+        if item.nodeid.startswith(prefix):
+            return rank
+    return len(SLOW_FIRST)
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_collection_modifyitems(config, items):
+    # tryfirst: xdist reads the xdist_group marks in its own hook of the same name.
+    for item in items:
+        group = item.nodeid.split("::")[0]
+        if item.nodeid.startswith("tests/test_notebooks.py::test_notebook_runs["):
+            group = item.nodeid
+        item.add_marker(pytest.mark.xdist_group(group))
+    items.sort(key=_rank)  # stable: within a group, the file's order

@@ -98,5 +98,8 @@ def test_importing_jaxcable_leaves_the_cache_off(tmp_path):
     )
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() in ("None", "")
-    # In this process too (the suite turned the command line's cache off).
-    assert not jax.config.jax_compilation_cache_dir
+    # In this process too: the only cache is the run's own (tests/conftest.py); the
+    # command line, run in-process with its cache turned off, left it as it was.
+    suite = os.environ.get("JAXCABLE_TEST_JAX_CACHE", "off")
+    expected = None if suite == "off" else suite
+    assert (jax.config.jax_compilation_cache_dir or None) == expected

@@ -1,3 +1,4 @@
+import os
 import pathlib
 
 import nbformat
@@ -24,7 +25,7 @@ def test_committed_without_outputs(path):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.name)
-def test_notebook_runs(path):
+def test_notebook_runs(path, jax_cache_env):
     nb = nbformat.read(path, as_version=4)
     # jupyter_client starts a kernel spec whose argv is "python" with this
     # interpreter (sys.executable), so the notebook runs in the venv under test.
@@ -34,4 +35,5 @@ def test_notebook_runs(path):
         kernel_name="python3",
         resources={"metadata": {"path": str(path.parent)}},
     )
-    client.execute()
+    # The kernel loads the kernels this run already compiled (tests/conftest.py).
+    client.execute(env={**os.environ, **jax_cache_env})
