@@ -75,6 +75,7 @@ SLOW_FIRST = (
     "tests/test_cli.py",  # 120 s
     "tests/test_cdpr.py",
     "tests/test_papers.py",  # calibrate: about 40 s
+    "tests/test_distributed.py",  # three processes: about 50 s
     "tests/test_notebooks.py::test_notebook_runs[05_cdpr.ipynb]",  # 33 s
     "tests/test_notebooks.py::test_notebook_runs[02_fit.ipynb]",  # 30 s
     "tests/test_notebooks.py::test_notebook_runs[01_papers.ipynb]",  # 25 s
