@@ -30,6 +30,7 @@ failure status.
 """
 
 import argparse
+import dataclasses
 import json
 import sys
 import time
@@ -53,20 +54,8 @@ from jaxcable._drive.drives import (  # noqa: E402
 )
 
 
-PARAMETERS = (
-    "E1c",
-    "beta",
-    "gamma",
-    "E1r",
-    "E2c",
-    "t_c",
-    "eta0",
-    "E2r",
-    "t_r1",
-    "E3r",
-    "lambda1",
-    "lambda2",
-)
+# Every field of the model is a parameter (the model's own list, not a copy).
+PARAMETERS = tuple(f.name for f in dataclasses.fields(jc.IntegratedModel))
 PROTOCOL = jc.Protocol.cycles(1.0, cycles=2, samples_per_ramp=50, hold=60.0)
 GRID = jnp.asarray(np.concatenate([[0.0], np.logspace(-9, 4, 399)]))
 NAMES = [name for name in jc.RESULTS._name_to_item]  # noqa: SLF001
