@@ -136,7 +136,11 @@ def _problem(name):
                 time_,
                 force,
                 np.asarray(traj.elongation) + noise,
-                metadata={"length_mm": 1e3 * length, "id": f"{length}m-{peak:g}N"},
+                metadata={
+                    "length_mm": 1e3 * length,
+                    "id": f"{length}m-{peak:g}N",
+                    "control": "force",
+                },
             )
         )
     names = list(START_FACTORS)

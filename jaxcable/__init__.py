@@ -39,9 +39,11 @@ from ._fit import (
     residuals as residuals,
 )
 from ._io import (
+    ControlDetection as ControlDetection,
     SlackReport as SlackReport,
     SlackStretch as SlackStretch,
     TestData as TestData,
+    detect_control as detect_control,
     mask_slack as mask_slack,
     read_csv as read_csv,
     read_test as read_test,

@@ -28,7 +28,12 @@ def _history(tmp_path, *, elongation=False, name="history.csv"):
         elongation=np.full_like(_TIME, 7.0) if elongation else None,
         temperature=np.full_like(_TIME, 22.0),
         extra={"gauge_V": np.arange(_TIME.size) * 0.5},
-        metadata={"id": "cli", "material": "Dyneema SK78", "length_mm": 300.0},
+        metadata={
+            "id": "cli",
+            "material": "Dyneema SK78",
+            "length_mm": 300.0,
+            "control": "force",
+        },
     )
     path = tmp_path / name
     jc.write_csv(path, data)
@@ -356,7 +361,7 @@ def _synthetic_tests(model, seed=0):
                 time=time,
                 force=force,
                 elongation=np.asarray(traj.elongation) + noise,
-                metadata={"id": test_id, "length_mm": length},
+                metadata={"id": test_id, "length_mm": length, "control": "force"},
             )
         )
     return tests

@@ -40,7 +40,7 @@ def _history():
         time=time,
         force=noisy,
         elongation=np.zeros_like(time),
-        metadata={"id": "entry-points", "length_mm": 300.0},
+        metadata={"id": "entry-points", "length_mm": 300.0, "control": "force"},
     )
     return test
 

@@ -48,7 +48,11 @@ def _tests(models, designs=DESIGNS, seed=0, noise=NOISE):
         elongation = np.asarray(traj.elongation) + noise * rng.standard_normal(
             time.shape
         )
-        metadata = {"length_mm": 1e3 * length, "id": f"{1e3 * length:.0f}mm-{peak:g}N"}
+        metadata = {
+            "length_mm": 1e3 * length,
+            "id": f"{1e3 * length:.0f}mm-{peak:g}N",
+            "control": "force",
+        }
         out.append(jc.TestData(time, force, elongation, metadata=metadata))
     return out
 

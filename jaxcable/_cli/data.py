@@ -102,10 +102,13 @@ def read_tests(
     return tests
 
 
-def describe_tests(tests: Sequence[TestData], every: int) -> list[str]:
-    """One line per test: its name, samples, and what was masked as slack."""
+def describe_tests(
+    tests: Sequence[TestData], every: int, drives: Sequence | None = None
+) -> list[str]:
+    """One line per test: its name, samples, what was masked as slack, and (with
+    `drives`, a `ControlDetection` per test) its drive and why."""
     lines = []
-    for t in tests:
+    for i, t in enumerate(tests):
         name = pathlib.Path(t.source).name if t.source else t.metadata.get("id", "")
         masked = int(np.sum(~t.mask))
         text = f"  {name}: {t.num_samples} samples"
@@ -122,5 +125,7 @@ def describe_tests(tests: Sequence[TestData], every: int) -> list[str]:
                 for s in report.stretches
             )
             text += f" (slack: {where})"
+        if drives is not None:
+            text += f"; drive: {drives[i].reason}"
         lines.append(text)
     return lines

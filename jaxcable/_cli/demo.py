@@ -187,6 +187,7 @@ def _simulate(args, out: pathlib.Path) -> tuple[list, list[pathlib.Path]]:
                 "rate_mm_per_min": r.case.rate,
                 "protocol": f"{r.case.cycles} x 0-{r.case.force_max:g} N",
                 "model": "integrated (default parameters), simulated by jaxcable demo",
+                "control": "force",
             },
         )
         path = out / f"{r.case.name}.csv"

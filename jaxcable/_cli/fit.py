@@ -8,7 +8,7 @@ import warnings
 import jax
 import numpy as np
 
-from .._fit import FitResult, IdentifiabilityWarning, fit
+from .._fit import FitResult, IdentifiabilityWarning, fit, resolve_drives
 from .._models import AbstractCableModel
 from .._progress import Progress
 from .._report import FIT_REPORT_FILES, write_report
@@ -51,6 +51,7 @@ def run_fit(
     per_test: list[str],
     args,
     progress: bool,
+    drive="auto",
 ) -> FitResult:
     """`jaxcable.fit` with the command line's solver options.
 
@@ -63,6 +64,7 @@ def run_fit(
         (empty: the defaults of `jaxcable.fit`).
     - `args`: the parsed command line (`starts`, `max_steps`, `seed`).
     - `progress`: whether to draw a progress bar.
+    - `drive`: the drive of every test (see `jaxcable.fit`).
 
     **Returns:**
 
@@ -83,11 +85,21 @@ def run_fit(
                 max_steps=args.max_steps,
                 key=jax.random.key(args.seed),
                 throw=False,
+                drive=drive,
             )
         except ValueError as e:
             raise CliError(
                 f"{named_files(tests)}: cannot fit model '{name}': {e}"
             ) from None
+
+
+def test_drives(tests, drive: str):
+    """Each test's drive with its reason (`--drive`, the file's `control` line, or
+    detected from the data)."""
+    try:
+        return resolve_drives(tests, drive)
+    except ValueError as e:
+        raise CliError(f"--drive: {e}") from None
 
 
 def fit_failure(result: FitResult) -> CliError | None:
@@ -123,8 +135,9 @@ def fit_command(args) -> int:
         outputs += report_files(args.report, FIT_REPORT_FILES)
     refuse_inputs(outputs, input_files(args))
     tests = read_tests(args.data, data_options(args), args.every, progress)
+    drives = test_drives(tests, args.drive)
     print(f"read {len(tests)} file(s):")
-    print("\n".join(describe_tests(tests, args.every)))
+    print("\n".join(describe_tests(tests, args.every, drives)))
     result = run_fit(
         model,
         name,
@@ -133,6 +146,7 @@ def fit_command(args) -> int:
         per_test=per_test,
         args=args,
         progress=progress,
+        drive=[d.control for d in drives],
     )
     failure = fit_failure(result)
     print()

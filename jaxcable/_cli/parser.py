@@ -135,6 +135,19 @@ def _add_data_options(parser) -> None:
     )
 
 
+def _add_drive_option(parser, what: str) -> None:
+    parser.add_argument(
+        "--drive",
+        choices=("auto", "force", "elongation"),
+        default="auto",
+        help=f"which measured channel drives the model {what}: force (force "
+        "control: creep, load cycles; the elongation is scored), elongation "
+        "(displacement control: relaxation, constant crosshead rate; the force is "
+        "solved and scored), or auto (default: the file's '# control:' line, else "
+        "detected from which channel is held and ramped; printed per file)",
+    )
+
+
 def _add_solver_options(parser, starts: int) -> None:
     parser.add_argument(
         "--starts",
@@ -238,14 +251,16 @@ def build_parser() -> argparse.ArgumentParser:
         help="fit a model to measured tests",
         description=(
             "Fit a cable model to one or many measured tests at once by least squares "
-            "on elongation (Levenberg-Marquardt, multi-start; see jaxcable.fit). "
+            "(Levenberg-Marquardt, multi-start; see jaxcable.fit): a force-controlled "
+            "test is driven by its force and scored on elongation, a "
+            "displacement-controlled one driven by its elongation and scored on "
+            "force (--drive). "
             "Material parameters are shared by all tests. Files are read with "
             "jaxcable.read_test: canonical CSV files or raw tensile-tester exports "
             "(other separators and encodings, preamble and unit rows, quoted "
             "numbers); slack stretches are detected, masked and not fitted. Writes "
             "the fitted parameters as PARAMS.json (use it with 'jaxcable simulate "
-            "--params') and prints the RMSE of every test (mm and % of its peak "
-            "elongation), the parameters with standard errors and correlations, and "
+            "--params') and prints the RMSE of every test (mm or N, and % of its peak), the parameters with standard errors and correlations, and "
             "warnings naming parameters the data cannot identify."
         ),
     )
@@ -279,6 +294,7 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="NAMES",
         help="comma-separated parameters fitted with one value per test",
     )
+    _add_drive_option(fit, "of each test")
     _add_solver_options(fit, starts=4)
     fit.set_defaults(run=fit_command)
 

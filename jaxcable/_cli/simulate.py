@@ -113,6 +113,8 @@ def _simulate_protocol(args) -> int:
         **spec.metadata,
         "protocol": pathlib.Path(args.input).name,
         "model": name,
+        # A fit of this file drives it by its force history, as it was made.
+        "control": "force",
     }
     if args.params:
         metadata["model_params"] = params_metadata(model)

@@ -103,6 +103,7 @@ def _score(
                 max_steps=max_steps,
                 key=key,
                 throw=False,
+                drive="force",
             )
 
     sq_held = n_held = sq_train = n_train = 0.0

@@ -43,7 +43,8 @@ def model_elongations(
         )
         for t in tests
     ]
-    padded = pad_tests(unmasked)
+    # The diagnosis scores elongations: every test is driven by its force.
+    padded = pad_tests(unmasked, drive="force")
     model = result.model if isinstance(result, FitResult) else result
     params, static = eqx.partition(model, eqx.is_inexact_array)
     r = np.asarray(_residuals(params, static, padded))

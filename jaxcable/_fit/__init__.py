@@ -2,6 +2,7 @@ from .data import (
     PaddedTests as PaddedTests,
     as_test_list as as_test_list,
     pad_tests as pad_tests,
+    resolve_drives as resolve_drives,
     test_id as test_id,
 )
 from .fit import fit as fit

@@ -12,7 +12,7 @@ from jaxtyping import Array, Bool, Float
 
 from .. import _checks
 from .._cable import ZERO_CELSIUS, Cable
-from .._io import TestData
+from .._io import ControlDetection, TestData, force_noise, resolve_control
 
 
 class PaddedTests(eqx.Module):
@@ -32,6 +32,13 @@ class PaddedTests(eqx.Module):
     - `temperature`: temperature at each sample, K (the test's temperature record,
         else its `Cable.temperature`).
     - `cable`: a batched [`jaxcable.Cable`][], one per test.
+    - `drive`: each test's drive, `"force"` (its force history drives the model, the
+        elongation is scored) or `"elongation"` (the elongation drives, the solved
+        force is scored).
+    - `scale`: each test's residual unit: 1 when every test is scored in the same
+        channel (residuals in m, or N); in a fit mixing both, the noise standard
+        deviation of the test's scored channel (m or N), so that residuals are
+        dimensionless and each test weighs by its own noise.
     """
 
     time: Float[Array, "tests samples"]
@@ -41,10 +48,36 @@ class PaddedTests(eqx.Module):
     weight: Float[Array, "tests samples"]
     temperature: Float[Array, "tests samples"]
     cable: Cable
+    drive: tuple[str, ...] = eqx.field(static=True)
+    scale: Float[Array, " tests"]
 
     @property
     def num_tests(self) -> int:
         return int(self.time.shape[0])
+
+    @property
+    def by_force(self) -> np.ndarray:
+        """Indices of the force-driven tests."""
+        return np.array([i for i, d in enumerate(self.drive) if d == "force"], int)
+
+    @property
+    def by_elongation(self) -> np.ndarray:
+        """Indices of the elongation-driven tests."""
+        return np.array([i for i, d in enumerate(self.drive) if d != "force"], int)
+
+    @property
+    def measured(self) -> Float[Array, "tests samples"]:
+        """The scored channel of each test (elongation m, or force N), 0 where its
+        weight is 0."""
+        elongation = np.array([d != "force" for d in self.drive])[:, None]
+        return jnp.where(elongation, self.force, self.elongation) * self.weight
+
+    @property
+    def units(self) -> tuple[str, ...]:
+        """The residual unit of each test: `"m"`, `"N"` or `"1"` (mixed fits)."""
+        if len(set(self.drive)) > 1:
+            return ("1",) * len(self.drive)
+        return tuple("m" if d == "force" else "N" for d in self.drive)
 
 
 def test_id(test, index: int) -> str:
@@ -96,6 +129,7 @@ class _Row:
     mask: np.ndarray  # True where the sample is fitted
     temperature: np.ndarray  # K
     cable: Cable
+    drive: str
 
 
 def _required_fields(test, where: str) -> None:
@@ -135,8 +169,9 @@ def _temperature(test, where: str, time: np.ndarray, cable: Cable) -> np.ndarray
     return temperature
 
 
-def _checked_row(test, index: int) -> _Row:
-    """Test `index` checked (errors name `tests[index]` and the field)."""
+def _checked_row(test, index: int, drive: str) -> _Row:
+    """Test `index` checked (errors name `tests[index]` and the field); an
+    elongation-driven test needs its elongation at every sample."""
     where = f"tests[{index}] ({test_id(test, index)})"
     _required_fields(test, where)
     time = np.asarray(test.time, float)
@@ -154,7 +189,8 @@ def _checked_row(test, index: int) -> _Row:
     mask = _mask(test, where, time.shape)
     _checks.require_finite(f"{where}.time", time)
     _checks.require_finite(f"{where}.force", force)
-    _checks.require_finite(f"{where}.elongation", elongation[mask])
+    driven = elongation if drive == "elongation" else elongation[mask]
+    _checks.require_finite(f"{where}.elongation", driven)
     _checks.require_increasing(f"{where}.time", time)
     _checks.require_positive(f"{where}.force", force, allow_zero=True)
     cable = test.cable()
@@ -162,14 +198,58 @@ def _checked_row(test, index: int) -> _Row:
     return _Row(
         time=time,
         force=force,
-        elongation=np.where(mask, elongation, 0.0),
+        elongation=elongation
+        if drive == "elongation"
+        else np.where(mask, elongation, 0.0),
         mask=mask,
         temperature=_temperature(test, where, time, cable),
         cable=cable,
+        drive=drive,
     )
 
 
-def pad_tests(tests, *, multiple: int = 16) -> PaddedTests:
+def resolve_drives(tests, drive=None) -> list[ControlDetection]:
+    """The drive of every test, and why ([`jaxcable.ControlDetection`][]).
+
+    **Arguments:**
+
+    - `tests`: one test or a sequence of tests.
+    - `drive`: `"auto"` or `None` (each test's `metadata['control']`, else detected
+        from its data by [`jaxcable.detect_control`][]), `"force"`, `"elongation"`,
+        or a sequence of these, one per test.
+
+    **Raises:**
+
+    `ValueError` naming `drive`: an unknown name, or a sequence of another length.
+    """
+    tests = as_test_list(tests)
+    if drive is None or isinstance(drive, str):
+        drives = [drive] * len(tests)
+    else:
+        drives = list(drive)
+        if len(drives) != len(tests):
+            raise ValueError(
+                f"`drive` names {len(drives)} drives for {len(tests)} tests; give "
+                "one name, or one per test."
+            )
+    return [resolve_control(t, d) for t, d in zip(tests, drives)]
+
+
+def _scales(rows: list[_Row]) -> np.ndarray:
+    """Each test's residual unit (see `PaddedTests.scale`)."""
+    if len({r.drive for r in rows}) == 1:
+        return np.ones(len(rows))
+    out = []
+    for r in rows:
+        scored = (r.force if r.drive == "elongation" else r.elongation)[r.mask]
+        peak = float(np.max(np.abs(scored)))
+        # Quantised or noise-free records have no measurable noise: 1e-4 of the
+        # peak stands in, as a resolution.
+        out.append(max(force_noise(scored), 1e-4 * peak, 1e-300))
+    return np.array(out)
+
+
+def pad_tests(tests, *, drive=None, multiple: int = 16) -> PaddedTests:
     """Check, pad and stack tests for [`jaxcable.residuals`][] and the fit kernel.
 
     Each test needs `time` (s), `force` (N), `elongation` (m) and `.cable()` (a
@@ -181,6 +261,8 @@ def pad_tests(tests, *, multiple: int = 16) -> PaddedTests:
     **Arguments:**
 
     - `tests`: one test or a sequence of tests.
+    - `drive`: which channel drives each test; see [`jaxcable.fit`][] (default: each
+        test's `metadata['control']`, else detected from its data).
     - `multiple`: the padded length is rounded up to a multiple of this, so that data
         sets of similar size reuse one compiled kernel.
 
@@ -194,7 +276,9 @@ def pad_tests(tests, *, multiple: int = 16) -> PaddedTests:
     samples, non-finite values, time not strictly increasing, negative force or
     force above the breaking load, a mask of the wrong shape or masking every sample.
     """
-    rows = [_checked_row(test, i) for i, test in enumerate(as_test_list(tests))]
+    tests = as_test_list(tests)
+    drives = [d.control for d in resolve_drives(tests, drive)]
+    rows = [_checked_row(t, i, d) for i, (t, d) in enumerate(zip(tests, drives))]
     longest = max(r.time.shape[0] for r in rows)
     length = -(-longest // multiple) * multiple
 
@@ -231,4 +315,6 @@ def pad_tests(tests, *, multiple: int = 16) -> PaddedTests:
         weight=jnp.asarray(padded([r.mask for r in rows], False).astype(float), dtype),
         temperature=jnp.asarray(padded([r.temperature for r in rows]), dtype),
         cable=cable,
+        drive=tuple(drives),
+        scale=jnp.asarray(_scales(rows), dtype),
     )

@@ -96,7 +96,7 @@ def _outcome(
             "; ".join(stats.warnings) or "no parameter flagged as unidentifiable"
         )
         raise RuntimeError(
-            f"jaxcable.fit: no start converged ({message}); best SSR {ssr:.3g} m^2. "
+            f"jaxcable.fit: no start converged ({message}); best SSR {ssr:.3g}. "
             f"Identifiability at the best start: {diagnosis}. Try more `max_steps`, "
             "other start values, fewer fitted parameters, or throw=False to inspect "
             "the result."
@@ -118,13 +118,19 @@ def _fitted_models(
 
 def _rmse(
     out: KernelOut, problem: Problem, num_samples: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """Each test's RMS residual, mm, and as a percentage of its peak elongation."""
-    r = np.asarray(out.residuals, float)
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each test's RMS residual in its scored channel: elongation, mm (NaN for an
+    elongation-driven test); force, N (NaN for a force-driven test); and as a
+    percentage of the test's peak |measured value| in that channel."""
+    data = problem.data
+    r = np.asarray(out.residuals, float) * np.asarray(data.scale, float)[:, None]
     rmse = np.sqrt((r**2).sum(axis=1) / num_samples)
-    measured = np.asarray(problem.data.elongation, float)
-    peak = np.max(np.abs(measured) * np.asarray(problem.data.weight), axis=1)
-    return 1e3 * rmse, 100 * rmse / np.where(peak > 0, peak, np.nan)
+    measured = np.asarray(data.measured, float)
+    peak = np.max(np.abs(measured), axis=1)
+    by_force = np.array([d == "force" for d in data.drive])
+    rmse_mm = np.where(by_force, 1e3 * rmse, np.nan)
+    rmse_n = np.where(by_force, np.nan, rmse)
+    return rmse_mm, rmse_n, 100 * rmse / np.where(peak > 0, peak, np.nan)
 
 
 def fit(
@@ -140,12 +146,22 @@ def fit(
     spread: float = 0.5,
     key: PRNGKeyArray | None = None,
     throw: bool = True,
+    drive="auto",
 ) -> FitResult:
-    """Fit a model's parameters to one or many tests by least squares on elongation.
+    """Fit a model's parameters to one or many tests by least squares.
 
-    Each test's model is driven by its time-stamped force history
-    ([`jaxcable.simulate_force_history`][]); the residual is the model's minus the
-    measured elongation, m, over the samples each test's mask keeps (all by default).
+    **Drives.** A force-controlled test (creep, a load cycle) drives its model by its
+    time-stamped force history ([`jaxcable.simulate_force_history`][]); its residual
+    is the model's minus the measured elongation, m. A displacement-controlled test
+    (stress relaxation, a constant crosshead rate) drives it by its elongation
+    history ([`jaxcable.simulate_elongation_history`][], a Newton solve for the
+    force at every sample); its residual is the model's minus the measured force, N.
+    `drive="auto"` takes each test's `metadata['control']` (a `# control:` line),
+    else detects it from the data ([`jaxcable.detect_control`][]). Tests of both
+    kinds may be fitted together: each test's residuals are then divided by the
+    noise standard deviation of its scored channel (robust, from second
+    differences), so that every residual is dimensionless and weighs by its own
+    noise. Residuals count over the samples each test's mask keeps (all by default).
     Material parameters are shared by all tests (different lengths, rates, forces);
     parameters named in `per_test` take one value per test. The tests are padded to
     one length and run in one `vmap`, so one compiled kernel serves them all.
@@ -228,6 +244,8 @@ def fit(
     - `throw`: raise `RuntimeError` when no start converged (default), with the
         solver's message and the identifiability warnings; with `False` return the
         best start with `converged=False` and the solver's `message`.
+    - `drive`: `"auto"` (default; see Drives above), `"force"`, `"elongation"`, or a
+        sequence of these, one per test.
 
     **Returns:**
 
@@ -243,7 +261,7 @@ def fit(
     """
     solver = _checked_solver(multistart, max_steps, spread, solver)
     test_list = as_test_list(tests)
-    problem, u_user = make_problem(model, test_list, fit, per_test, transforms)
+    problem, u_user = make_problem(model, test_list, fit, per_test, transforms, drive)
     layout = problem.layout
     num_samples = np.asarray(problem.data.weight).sum(axis=1).astype(int)
     n, p = int(num_samples.sum()), layout.size
@@ -261,7 +279,7 @@ def fit(
     for text in stats.warnings:
         warnings.warn(text, IdentifiabilityWarning, stacklevel=2)
     fitted_model, models = _fitted_models(out, problem)
-    rmse_mm, rmse_percent = _rmse(out, problem, num_samples)
+    rmse_mm, rmse_n, rmse_percent = _rmse(out, problem, num_samples)
     return FitResult(
         model=fitted_model,
         models=models,
@@ -275,6 +293,9 @@ def fit(
         loss=ssr,
         rmse_mm=rmse_mm,
         rmse_percent=rmse_percent,
+        rmse_N=rmse_n,
+        drives=problem.data.drive,
+        loss_unit={"m": "m^2", "N": "N^2", "1": "1"}[problem.data.units[0]],
         test_ids=tuple(test_id(t, i) for i, t in enumerate(test_list)),
         num_samples=num_samples,
         warnings=stats.warnings,

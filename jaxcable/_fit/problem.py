@@ -14,6 +14,7 @@ from jaxtyping import Array, Bool, Float, PyTree
 from .. import _checks
 from .._cable import Cable
 from .._drive import CableState, init_state, step
+from .._drive.drives import ElongationDrive, ElongationSample, default_solver
 from .._models import AbstractCableModel, ParameterInfo
 from .._results import RESULTS
 from .data import PaddedTests, as_test_list, pad_tests, test_id
@@ -61,16 +62,43 @@ def _elongation_history(
     return strain * cable.length, final.result
 
 
+def _force_history(
+    model, cable, time, elongation, mask, temperature
+) -> tuple[Float[Array, " samples"], RESULTS]:
+    """The force (N) of [`jaxcable.simulate_elongation_history`][] and its status:
+    the same drive step (a Newton solve per sample) in a scan that keeps only the
+    force, for the reason `_elongation_history` gives."""
+    drive = ElongationDrive(
+        ElongationSample(time, elongation, mask),
+        default_solver(jnp.result_type(time)),
+    )
+
+    def body(carry: CableState, x):
+        t, e, m, temp = x
+        here = eqx.tree_at(lambda c: c.temperature, cable, temp)
+        new, _ = drive.step(model, here, carry, ElongationSample(t, e, m))
+        return new, new.force
+
+    final, force = jax.lax.scan(
+        body, init_state(model, cable, time[0]), (time, elongation, mask, temperature)
+    )
+    return force, final.result
+
+
 def residuals(
     params: PyTree,
     static: PyTree,
     tests: PaddedTests,
 ) -> Float[Array, "tests samples"]:
-    """Model minus measured elongation of every test, m: the fit's residual.
+    """Model minus measured value of every test: the fit's residual.
 
     A pure, jittable function of `params` (differentiate it with `jax.jacfwd`,
-    `jax.grad` of a loss, ...). Each test's model is driven by its time-stamped force
-    history ([`jaxcable.simulate_force_history`][]); the tests run in one `vmap`.
+    `jax.grad` of a loss, ...). A force-driven test's model is driven by its
+    time-stamped force history ([`jaxcable.simulate_force_history`][]) and its
+    elongation is scored (m); an elongation-driven test's by its elongation history
+    ([`jaxcable.simulate_elongation_history`][]) and its force is scored (N). Each
+    test's residual is divided by its `tests.scale` (1 unless the tests mix both
+    drives). The tests of each drive run in one `vmap`.
 
     **Arguments:**
 
@@ -81,7 +109,8 @@ def residuals(
 
     **Returns:**
 
-    The residuals, m, shape `(tests, samples)`: 0 at padding and masked samples, NaN
+    The residuals (m, N, or dimensionless: `tests.units`), shape `(tests, samples)`:
+    0 at padding and masked samples, NaN
     for every sample of a test whose simulation failed (a parameter outside its
     domain, a non-finite strain; `Trajectory.result`), so that a least-squares solver
     rejects such a step.
@@ -93,23 +122,48 @@ def residuals(
         )
     in_axes = jax.tree_util.tree_map(lambda x: 0 if jnp.ndim(x) == 1 else None, params)
 
-    def one(p, cable, time, force, simulate, weight, measured, temperature):
-        model = eqx.combine(p, static)
-        elongation, result = _elongation_history(
-            model, cable, time, force, simulate, temperature
-        )
-        r = jnp.where(weight > 0, elongation - measured, 0.0)
-        return jnp.where(result == RESULTS.successful, r, jnp.nan)
+    def kernel(history):
+        def run(p, cable, time, driving, simulate, weight, measured, temperature):
+            model = eqx.combine(p, static)
+            value, result = history(model, cable, time, driving, simulate, temperature)
+            r = jnp.where(weight > 0, value - measured, 0.0)
+            return jnp.where(result == RESULTS.successful, r, jnp.nan)
 
-    return jax.vmap(one, in_axes=(in_axes, 0, 0, 0, 0, 0, 0, 0))(
-        params,
-        tests.cable,
-        tests.time,
-        tests.force,
-        tests.simulate,
-        tests.weight,
-        tests.elongation,
-        tests.temperature,
+        return jax.vmap(run, in_axes=(in_axes, 0, 0, 0, 0, 0, 0, 0))
+
+    def group(index, history, driving, scored):
+        # Static indices: each drive's tests are gathered and run in their own vmap.
+        everyone = index.size == tests.num_tests
+
+        def take(x):
+            return x if everyone else x[index]
+
+        p = jax.tree_util.tree_map(
+            lambda x, a: x if a is None else take(x), params, in_axes
+        )
+        r = kernel(history)(
+            p,
+            jax.tree_util.tree_map(take, tests.cable),
+            take(tests.time),
+            take(driving),
+            take(tests.simulate),
+            take(tests.weight),
+            take(scored),
+            take(tests.temperature),
+        )
+        return r / take(tests.scale)[:, None]
+
+    by_force, by_elongation = tests.by_force, tests.by_elongation
+    if not by_elongation.size:
+        return group(by_force, _elongation_history, tests.force, tests.elongation)
+    if not by_force.size:
+        return group(by_elongation, _force_history, tests.elongation, tests.force)
+    out = jnp.zeros(tests.time.shape, tests.time.dtype)
+    out = out.at[by_force].set(
+        group(by_force, _elongation_history, tests.force, tests.elongation)
+    )
+    return out.at[by_elongation].set(
+        group(by_elongation, _force_history, tests.elongation, tests.force)
     )
 
 
@@ -164,7 +218,7 @@ class Problem(eqx.Module):
         )
 
     def residuals(self, u: Float[Array, " p"]) -> Float[Array, "tests samples"]:
-        """[`jaxcable.residuals`][] at u, m."""
+        """[`jaxcable.residuals`][] at u (m, N or dimensionless: `data.units`)."""
         return residuals(self.params(u), self.static, self.data)
 
     def ssr(self, u: Float[Array, " p"]) -> Float[Array, ""]:
@@ -270,12 +324,13 @@ def make_problem(
     fit: Sequence[str] | None,
     per_test: Sequence[str] | None,
     transforms: Mapping[str, str] | None,
+    drive=None,
 ) -> tuple[Problem, Float[Array, " p"]]:
     """The least-squares problem of [`jaxcable.fit`][] and [`jaxcable.make_loss`][].
 
     **Arguments:**
 
-    - `model`, `fit`, `per_test`, `transforms`: as in [`jaxcable.fit`][].
+    - `model`, `fit`, `per_test`, `transforms`, `drive`: as in [`jaxcable.fit`][].
     - `tests`: a list of tests (see `as_test_list`).
 
     **Returns:**
@@ -291,7 +346,7 @@ def make_problem(
             "`model` must be a jaxcable model (an AbstractCableModel instance such as "
             f"jaxcable.IntegratedModel()), got {type(model).__name__}."
         )
-    data = pad_tests(tests)
+    data = pad_tests(tests, drive=drive)
     declared = _checked_model(model, data, tests)
     available = list(declared)
     per = _names(model, available, "per_test", per_test)
@@ -329,6 +384,7 @@ def make_loss(
     fit: Sequence[str] | None = None,
     per_test: Sequence[str] | None = None,
     transforms: Mapping[str, str] | None = None,
+    drive="auto",
 ) -> tuple[
     Callable[[dict[str, Array]], Float[Array, ""]],
     dict[str, Array],
@@ -338,7 +394,8 @@ def make_loss(
     optimiser (optax, ...).
 
     The same problem as [`jaxcable.fit`][] solves: the sum of squared residuals
-    (model minus measured elongation, m^2, masked samples excluded) over all tests,
+    (model minus measured elongation, m^2, or force, N^2, by each test's drive;
+    masked samples excluded) over all tests,
     as a function of a dict of unconstrained parameters (log of the positive ones;
     see [`jaxcable.fit`][] for each model's reparameterisation).
 
@@ -356,7 +413,8 @@ def make_loss(
 
     **Arguments:**
 
-    - `model`, `tests`, `fit`, `per_test`, `transforms`: as in [`jaxcable.fit`][].
+    - `model`, `tests`, `fit`, `per_test`, `transforms`, `drive`: as in
+        [`jaxcable.fit`][].
 
     **Returns:**
 
@@ -366,7 +424,9 @@ def make_loss(
     per-test parameters; `to_model(params)`, the model with those values (per-test
     fields as `(tests,)` arrays).
     """
-    problem, u0 = make_problem(model, as_test_list(tests), fit, per_test, transforms)
+    problem, u0 = make_problem(
+        model, as_test_list(tests), fit, per_test, transforms, drive
+    )
     layout = problem.layout
 
     def loss(params: dict[str, Array]) -> Float[Array, ""]:

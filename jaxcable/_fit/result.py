@@ -54,11 +54,12 @@ class FitResult:
         delta method, G C G^T with G = dx/du.
     - `correlation`: `covariance` normalised by `stderr`.
     - `singular_values`: of J (in u), largest first.
-    - `loss`: sum of squared residuals at the optimum, SSR, m^2.
-    - `rmse_mm`: RMS residual of each test over its fitted samples, mm.
-    - `rmse_percent`: `rmse_mm` as a percentage of the test's largest |measured
-        elongation| (Park et al. report errors as RMSE in mm and as this percentage
-        of the peak elongation).
+    - `loss`: sum of squared residuals at the optimum, SSR, in `loss_unit`.
+    - `rmse_mm`: RMS elongation residual of each force-driven test over its fitted
+        samples, mm (NaN for an elongation-driven test).
+    - `rmse_percent`: each test's RMS residual as a percentage of its largest
+        |measured value| in its scored channel (Park et al. report errors as RMSE
+        in mm and as this percentage of the peak elongation).
     - `test_ids`: each test's `metadata['id']`, file name or `test i`.
     - `num_samples`: fitted (unmasked) samples per test.
     - `warnings`: the identifiability warnings (also issued with `warnings.warn`).
@@ -67,6 +68,12 @@ class FitResult:
     - `num_steps`: solver steps of the chosen start.
     - `start_losses`: SSR reached from each start (m^2; inf where it failed).
     - `per_test`: the names fitted per test.
+    - `rmse_N`: RMS force residual of each elongation-driven test, N (NaN for a
+        force-driven test); `None` in results read from files written before drives.
+    - `drives`: each test's drive, `"force"` or `"elongation"` (see
+        [`jaxcable.fit`][]).
+    - `loss_unit`: `"m^2"` (every test force-driven), `"N^2"` (every test
+        elongation-driven) or `"1"` (both: residuals in noise units).
     """
 
     model: AbstractCableModel
@@ -89,6 +96,9 @@ class FitResult:
     num_steps: int
     start_losses: np.ndarray
     per_test: tuple[str, ...] = ()
+    rmse_N: np.ndarray | None = None
+    drives: tuple[str, ...] = ()
+    loss_unit: str = "m^2"
 
     @property
     def params(self) -> dict[str, float]:
@@ -100,6 +110,16 @@ class FitResult:
         """stderr / |value| of each fitted parameter (inf for a zero value)."""
         with np.errstate(divide="ignore", invalid="ignore"):
             return np.where(self.values != 0, self.stderr / np.abs(self.values), np.inf)
+
+    def _drive(self, i: int) -> str:
+        return self.drives[i] if self.drives else "force"
+
+    def rmse(self, i: int) -> tuple[float, str]:
+        """Test i's RMS residual in its scored channel and that channel's unit
+        (`"mm"` or `"N"`)."""
+        if self._drive(i) == "force":
+            return float(self.rmse_mm[i]), "mm"
+        return float(self.rmse_N[i]), "N"
 
     def _per_test_rows(self):
         return zip(self.test_ids, self.num_samples, self.rmse_mm, self.rmse_percent)
@@ -121,13 +141,27 @@ class FitResult:
         lines = [
             f"jaxcable fit: {type(self.model).__name__}, {len(self.test_ids)} test(s), "
             f"{n} samples, {len(self.names)} parameters",
-            f"SSR {self.loss:.6g} m^2; {outcome}; "
+            f"SSR {self.loss:.6g} {self.loss_unit}; {outcome}; "
             f"best of {len(self.start_losses)} start(s)",
             "",
-            f"{'test':<24} {'samples':>8} {'RMSE mm':>10} {'RMSE %':>8}",
         ]
-        for tid, k, mm, pct in self._per_test_rows():
-            lines.append(f"{tid[:24]:<24} {int(k):>8} {mm:>10.4f} {pct:>8.2f}")
+        if set(self.drives) <= {"force"}:
+            lines.append(f"{'test':<24} {'samples':>8} {'RMSE mm':>10} {'RMSE %':>8}")
+            for tid, k, mm, pct in self._per_test_rows():
+                lines.append(f"{tid[:24]:<24} {int(k):>8} {mm:>10.4f} {pct:>8.2f}")
+        else:
+            lines.append(
+                f"{'test':<24} {'drive':>10} {'samples':>8} {'RMSE':>10}      "
+                f"{'RMSE %':>8}"
+            )
+            for i, (tid, k, pct) in enumerate(
+                zip(self.test_ids, self.num_samples, self.rmse_percent)
+            ):
+                value, unit = self.rmse(i)
+                lines.append(
+                    f"{tid[:24]:<24} {self._drive(i):>10} {int(k):>8} "
+                    f"{value:>10.4g} {unit:<4} {pct:>8.2f}"
+                )
         lines += [
             "",
             f"{'parameter':<12} {'value':>12} {'std err':>10} {'rel %':>8}  unit",
@@ -187,12 +221,17 @@ class FitResult:
                 {
                     "id": tid,
                     "samples": int(k),
-                    "rmse_mm": float(mm),
-                    "rmse_percent": float(pct),
+                    "drive": self._drive(i),
+                    "rmse_mm": _json_number(float(mm)),
+                    "rmse_N": _json_number(self.rmse(i)[0])
+                    if self._drive(i) != "force"
+                    else None,
+                    "rmse_percent": _json_number(float(pct)),
                 }
-                for tid, k, mm, pct in self._per_test_rows()
+                for i, (tid, k, mm, pct) in enumerate(self._per_test_rows())
             ],
             "loss_m2": float(self.loss),
+            "loss_unit": self.loss_unit,
             "converged": bool(self.converged),
             "message": self.message,
             "num_steps": int(self.num_steps),
@@ -274,8 +313,13 @@ class FitResult:
                 [_from_json_number(s) for s in doc.get("singular_values", [])]
             ),
             loss=float(doc["loss_m2"]),
-            rmse_mm=np.array([t["rmse_mm"] for t in tests], float),
-            rmse_percent=np.array([t["rmse_percent"] for t in tests], float),
+            rmse_mm=np.array([_from_json_number(t["rmse_mm"]) for t in tests]),
+            rmse_percent=np.array(
+                [_from_json_number(t["rmse_percent"]) for t in tests]
+            ),
+            rmse_N=np.array([_from_json_number(t.get("rmse_N")) for t in tests]),
+            drives=tuple(t.get("drive", "force") for t in tests),
+            loss_unit=doc.get("loss_unit", "m^2"),
             test_ids=tuple(t["id"] for t in tests),
             num_samples=np.array([t["samples"] for t in tests], int),
             warnings=tuple(doc.get("warnings", [])),

@@ -11,6 +11,7 @@ import jax
 import jax.numpy as jnp
 import jax.random as jr
 import lineax as lx
+import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Bool, Float, PRNGKeyArray, PyTree
 
@@ -154,7 +155,7 @@ def solve(
     steps, and the flat residuals (m) and their Jacobian in u at the solution.
     """
     data = problem.data
-    scale = jnp.sqrt(_DAMPING * jnp.sum((data.elongation * data.weight) ** 2))
+    scale = jnp.sqrt(_DAMPING * jnp.sum((data.measured / data.scale[:, None]) ** 2))
     fn = _scaled_residual_fn(problem, jac, scale)
     sol = optx.least_squares(fn, solver, u0, max_steps=max_steps, throw=False)
     # A Gauss-Newton-type solver's state holds the residuals and the linearised
@@ -199,7 +200,10 @@ def _data_derived_start(
         [jnp.full((s,), k) for s, k in zip(layout.sizes, layout.stiffness)]
     ).astype(dtype)
     data = problem.data
-    measured = data.elongation * data.weight
+    measured = data.measured / data.scale[:, None]
+    # A stiffer model lengthens less under a force (the elongation scales as 1 / c)
+    # and pulls harder at an elongation (the force scales as c).
+    scored_force = np.array([d != "force" for d in data.drive])
     iterations = _SECANT_ITERATIONS if any(k != 0 for k in layout.stiffness) else 1
     limit = math.log(_SECANT_RANGE)
 
@@ -207,10 +211,15 @@ def _data_derived_start(
         r = problem.residuals(u_user + power * carry.log_c)
         loss = jnp.sum(r**2)
         better = jnp.isfinite(loss) & (loss < carry.best_loss)
-        model = (r + data.elongation) * data.weight
-        g = jnp.sum(model * measured) / jnp.sum(model**2)
-        ok = jnp.isfinite(g) & (g > 0)
-        step = jnp.where(ok, -jnp.log(jnp.where(ok, g, 1.0)), 0.0)
+        model = (r + measured) * data.weight
+        steps = []
+        for tests, sign in ((~scored_force, -1.0), (scored_force, 1.0)):
+            if tests.any():
+                m, e = model[tests], measured[tests]
+                g = jnp.sum(m * e) / jnp.sum(m**2)
+                ok = jnp.isfinite(g) & (g > 0)
+                steps.append(jnp.where(ok, sign * jnp.log(jnp.where(ok, g, 1.0)), 0.0))
+        step = sum(steps) / len(steps)
         new = _SecantCarry(
             log_c=jnp.clip(carry.log_c + step, -limit, limit),
             best_log_c=jnp.where(better, carry.log_c, carry.best_log_c),

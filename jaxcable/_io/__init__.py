@@ -1,6 +1,16 @@
+from .control import (
+    CONTROLS as CONTROLS,
+    ControlDetection as ControlDetection,
+    detect_control as detect_control,
+    resolve_control as resolve_control,
+)
 from .csv import read_csv as read_csv, write_csv as write_csv
 from .json_file import parse_json as parse_json, read_json as read_json
 from .protocol_file import ProtocolFile as ProtocolFile, read_protocol as read_protocol
 from .raw import read_test as read_test
-from .slack import SlackReport as SlackReport, SlackStretch as SlackStretch
+from .slack import (
+    SlackReport as SlackReport,
+    SlackStretch as SlackStretch,
+    force_noise as force_noise,
+)
 from .testdata import TestData as TestData, mask_slack as mask_slack

@@ -10,6 +10,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .control import control_name
 from .testdata import TestData, where
 from .units import (
     COLUMNS,
@@ -89,7 +90,10 @@ def read_lines(path, encoding: str | None = None) -> list[str]:
 
 
 def metadata_value(key: str, value, place: str) -> float | str:
-    """Parse one metadata value: a float for the numeric keys, else a string."""
+    """Parse one metadata value: a float for the numeric keys, the canonical name
+    for `control` (`"force"` or `"elongation"`), else a string."""
+    if key == "control":
+        return control_name(value, place)
     if key not in NUMERIC_METADATA:
         return str(value)
     if isinstance(value, bool):

@@ -128,7 +128,7 @@ class SlackReport:
 
 
 def force_noise(force: np.ndarray) -> float:
-    """Robust standard deviation of the force noise, N.
+    """Robust standard deviation of the noise of a channel (force, N; or any other).
 
     Second differences remove the signal's level and slope; the median absolute
     deviation ignores the few large ones at turning points.

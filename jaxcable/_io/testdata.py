@@ -49,8 +49,10 @@ class TestData:
         (not converted); carried through on write.
     - `metadata`: the `# key: value` block. `length_mm`, `diameter_mm`,
         `rate_mm_per_min`, `temperature_C` and `breaking_load_N` are floats in the
-        units their names say, checked when read; every other key (`material`, `id`,
-        ...) is a string.
+        units their names say, checked when read; `control` is the channel the test
+        imposed, `"force"` or `"elongation"` (see [`jaxcable.fit`][]'s `drive`;
+        displacement, extension, position... are read as `"elongation"`); every
+        other key (`material`, `id`, ...) is a string.
     - `source`: the file the data were read from (for error messages), or `None`.
     - `lines`: the 1-based line number of each sample in `source`, or `None`.
     - `mask`: per sample, True where it is to be fitted, False where it is not (a
@@ -126,6 +128,14 @@ class TestData:
         object.__setattr__(self, "metadata", dict(self.metadata))
         if self.lines is not None:
             object.__setattr__(self, "lines", np.asarray(self.lines, dtype=int))
+
+    @property
+    def control(self) -> str | None:
+        """The channel the test imposed, from `metadata['control']`: `"force"`,
+        `"elongation"`, or `None` when the metadata do not say (then
+        [`jaxcable.detect_control`][] tells from the data)."""
+        value = self.metadata.get("control")
+        return None if value is None else str(value)
 
     @property
     def num_samples(self) -> int:

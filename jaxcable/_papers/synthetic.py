@@ -51,7 +51,8 @@ def synthesize(
 
     **Returns:**
 
-    A [`jaxcable.TestData`][] with time, force, elongation and temperature.
+    A [`jaxcable.TestData`][] with time, force, elongation and temperature, and
+    `control: force` in its metadata (fits drive it by its force history).
     """
     traj = simulate_rate_test(model, cable, protocol)
     rng = np.random.default_rng(seed)
@@ -73,6 +74,8 @@ def synthesize(
         "diameter_mm": float(cable.diameter) * 1e3,
         "rate_mm_per_min": float(cable.speed) * 6e4,
         "temperature_C": temperature_C,
+        # The fits drive these tests by their recorded force history.
+        "control": "force",
     }
     meta.update(metadata or {})
     return TestData(

@@ -1,0 +1,205 @@
+"""Which channel a test imposed: force control (the force history is the input, the
+elongation the response) or displacement control (the elongation is the input, the
+force the response), from the file's `# control:` metadata or from the data.
+
+A tensile test's controlled channel is the one that follows the machine's program:
+it is held constant during holds and changes at a constant rate during ramps, while
+the other channel creeps or relaxes. [`jaxcable.detect_control`][] measures both
+signs of that and names the channel, with its evidence.
+"""
+
+from typing import NamedTuple
+
+import numpy as np
+
+from .slack import force_noise as noise_std
+
+
+CONTROLS = ("force", "elongation")
+
+# Names a file (or a user) may give in a `# control:` line, and what they mean.
+_SYNONYMS = {
+    "force": "force",
+    "load": "force",
+    "stress": "force",
+    "force control": "force",
+    "load control": "force",
+    "elongation": "elongation",
+    "displacement": "elongation",
+    "extension": "elongation",
+    "position": "elongation",
+    "stroke": "elongation",
+    "strain": "elongation",
+    "crosshead": "elongation",
+    "displacement control": "elongation",
+    "position control": "elongation",
+    "extension control": "elongation",
+    "strain control": "elongation",
+}
+
+# The detection's windows: the history is cut into this many blocks of samples (fewer
+# for a short history, so that a block has _MIN_BLOCK samples).
+_WINDOWS = 40
+_MIN_BLOCK = 6
+# A channel is held in a window when it moves by less than this many noise standard
+# deviations (plus _HELD_SHARE of its range), and moves when its change exceeds
+# _MOVING times that (a relaxing force late in a hold still moves).
+_HELD_NOISE = 4.0
+_HELD_SHARE = 2e-3
+_MOVING = 3.0
+# In a window where both move, the channel whose straight-line fit leaves less than
+# 1 / _LINEAR_RATIO of the other's relative misfit is the one following a ramp.
+_LINEAR_RATIO = 3.0
+# The detection names a channel when its evidence is at least _DECISIVE times the
+# other's, and at least _MIN_WINDOWS windows.
+_DECISIVE = 2.0
+_MIN_WINDOWS = 3
+
+
+def control_name(value: str, place: str) -> str:
+    """The canonical control (`"force"` or `"elongation"`) of a metadata value or an
+    argument, accepting the common names (load, displacement, extension, position,
+    stroke, strain, ...).
+
+    **Raises:**
+
+    `ValueError` starting with `place` for any other value.
+    """
+    key = " ".join(str(value).strip().lower().replace("_", " ").split())
+    if key not in _SYNONYMS:
+        raise ValueError(
+            f"{place}: {value!r} is not a control mode; use 'force' (load control) or "
+            "'elongation' (displacement, extension or position control)."
+        )
+    return _SYNONYMS[key]
+
+
+class ControlDetection(NamedTuple):
+    """Which channel drives a test, and why.
+
+    **Fields:**
+
+    - `control`: `"force"` or `"elongation"`.
+    - `reason`: one line for a report: where the answer came from (the caller, the
+        file's metadata, or the data with its evidence).
+    - `force_windows`: windows where the force is held while the elongation moves, plus
+        windows where the force follows a straight line and the elongation does not
+        (0 when not detected from the data).
+    - `elongation_windows`: the same with the channels exchanged.
+    - `detected`: True when the answer came from the data.
+    """
+
+    control: str
+    reason: str
+    force_windows: int = 0
+    elongation_windows: int = 0
+    detected: bool = False
+
+
+def _window_evidence(t, x, y) -> tuple[int, int]:
+    """(windows for x, windows for y): held-while-the-other-moves plus
+    straight-while-the-other-curves, over `_WINDOWS` blocks of samples."""
+    n = t.size
+    windows = max(1, min(_WINDOWS, n // _MIN_BLOCK))
+    edges = np.unique(np.linspace(0, n, windows + 1).astype(int))
+    channels = []
+    for z in (x, y):
+        span = float(np.ptp(z)) or 1.0
+        channels.append((z, span, _HELD_NOISE * noise_std(z) + _HELD_SHARE * span))
+    votes = [0, 0]
+    for a, b in zip(edges[:-1], edges[1:]):
+        if b - a < 4:
+            continue
+        tw = t[a:b] - t[a]
+        changes, misfits = [], []
+        for z, span, held in channels:
+            zw = z[a:b]
+            changes.append((float(np.ptp(zw)), span, held))
+            coef = np.polyfit(tw, zw, 1)
+            misfit = float(np.sqrt(np.mean((zw - np.polyval(coef, tw)) ** 2)))
+            misfits.append(misfit / max(float(np.ptp(zw)), 1e-300))
+        moving = [c > _MOVING * h for c, _, h in changes]
+        held = [c < h for c, _, h in changes]
+        for i in (0, 1):
+            j = 1 - i
+            if held[i] and moving[j]:
+                votes[i] += 1
+            elif moving[i] and moving[j] and misfits[i] * _LINEAR_RATIO < misfits[j]:
+                votes[i] += 1
+    return votes[0], votes[1]
+
+
+def detect_control(
+    time: np.ndarray, force: np.ndarray, elongation: np.ndarray
+) -> ControlDetection:
+    """Detect which channel a test imposed, from the data alone.
+
+    The history is cut into 40 blocks of samples (of at least 6). A block votes for the force when
+    the force is held (moves by less than 4 noise standard deviations plus 0.2 % of
+    its range) while the elongation moves (by more than 3 times its own such
+    threshold), or when
+    both move and the force is the straight line (a linear fit in time leaves less
+    than a third of the elongation's relative misfit): a hold or a ramp of the
+    machine's program. Likewise for the elongation. The channel with at least twice
+    the other's votes, and at least 3, is named; otherwise the evidence is
+    ambiguous and the force is returned (jaxcable's historical drive), which the
+    reason says.
+
+    **Arguments:**
+
+    - `time`: sample times, s.
+    - `force`: force, N.
+    - `elongation`: elongation (any length unit).
+
+    **Returns:**
+
+    A [`jaxcable.ControlDetection`][].
+    """
+    t = np.asarray(time, float)
+    f = np.asarray(force, float)
+    e = np.asarray(elongation, float)
+    ok = np.isfinite(t) & np.isfinite(f) & np.isfinite(e)
+    t, f, e = t[ok], f[ok], e[ok]
+    if t.size < 8:
+        return ControlDetection(
+            "force", "too few samples to detect the control: force (the default)"
+        )
+    votes_f, votes_e = _window_evidence(t, f, e)
+    evidence = f"{votes_f} windows for force, {votes_e} for elongation"
+    for name, mine, other in (
+        ("force", votes_f, votes_e),
+        ("elongation", votes_e, votes_f),
+    ):
+        if mine >= _MIN_WINDOWS and mine >= _DECISIVE * other:
+            return ControlDetection(
+                name, f"detected {name} control ({evidence})", votes_f, votes_e, True
+            )
+    return ControlDetection(
+        "force",
+        f"control ambiguous ({evidence}): force (the default); name it with "
+        "--drive or a '# control:' line",
+        votes_f,
+        votes_e,
+        True,
+    )
+
+
+def resolve_control(test, requested: str | None) -> ControlDetection:
+    """The control of one test: `requested` (`"force"`, `"elongation"`, or `None` /
+    `"auto"`), else the test's `metadata['control']`, else detected from its data.
+
+    **Raises:**
+
+    `ValueError` naming `drive` for an unknown `requested`.
+    """
+    if requested is not None and requested != "auto":
+        name = control_name(requested, "`drive`")
+        return ControlDetection(name, f"{name} (given)")
+    metadata = getattr(test, "metadata", None) or {}
+    if "control" in metadata:
+        name = control_name(metadata["control"], "metadata 'control'")
+        return ControlDetection(name, f"{name} (the file's 'control' line)")
+    elongation = getattr(test, "elongation", None)
+    if elongation is None:
+        return ControlDetection("force", "force (the test has no elongation)")
+    return detect_control(test.time, test.force, elongation)
