@@ -39,6 +39,7 @@ from ._fit import (
     residuals as residuals,
 )
 from ._io import (
+    MetadataConflictWarning as MetadataConflictWarning,
     SlackReport as SlackReport,
     SlackStretch as SlackStretch,
     TestData as TestData,
