@@ -129,7 +129,8 @@ def read_test(
     - `path`: the file.
     - `columns`: the file's columns in order, e.g. `"time_s,elongation_mm,force_N"`
         (a string or a sequence of names). Accepted: `time_s`, `time_ms`, `time_min`,
-        `time_h`, `force_N`, `force_kN`, `elongation_mm`, `elongation_m`,
+        `time_h`, `force_N`, `force_kN`, `force_lbf`, `force_kgf`,
+        `elongation_mm`, `elongation_cm`, `elongation_m`, `elongation_in`,
         `temperature_C`, and `-` for a column to ignore (not parsed). Time and force
         are required.
     - `skip_rows`: the number of lines before the first data row, counted from the
