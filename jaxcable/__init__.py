@@ -40,6 +40,7 @@ from ._fit import (
 )
 from ._io import (
     ControlDetection as ControlDetection,
+    MetadataConflictWarning as MetadataConflictWarning,
     SlackReport as SlackReport,
     SlackStretch as SlackStretch,
     TestData as TestData,

@@ -4,13 +4,15 @@ with the data options, thinned, and described in one line per file."""
 import csv
 import dataclasses
 import pathlib
+import sys
+import warnings
 from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from .._io import TestData, read_test
+from .._io import MetadataConflictWarning, TestData, read_test
 from .._progress import Progress
-from .common import CliError
+from .common import PROG, CliError, one_line
 
 
 # The csv module's limit on one cell (its default, 128 KiB): a longer cell is no
@@ -21,9 +23,13 @@ _FIELD_LIMIT = csv.field_size_limit()
 def read_located(read: Callable[..., TestData], path, **options) -> TestData:
     """`read(path, **options)`, with the errors the readers do not locate (the csv
     module's, a number too large for a float) reported naming `path`; the readers'
-    own `ValueError`s already name the file, line and column."""
+    own `ValueError`s already name the file, line and column. A given option that
+    replaces a file's value ([`jaxcable.MetadataConflictWarning`][]) is printed as
+    one warning line on stderr."""
     try:
-        return read(path, **options)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", MetadataConflictWarning)
+            data = read(path, **options)
     except csv.Error as e:
         message = str(e)
         if "field larger than field limit" in message:
@@ -33,6 +39,15 @@ def read_located(read: Callable[..., TestData], path, **options) -> TestData:
         raise CliError(f"{path}: cannot read the file: {message}.") from None
     except OverflowError as e:
         raise CliError(f"{path}: a number is too large: {e}.") from None
+    for warning in caught:
+        if issubclass(warning.category, MetadataConflictWarning):
+            # A given option replaced a file's value: one line, as errors are.
+            print(f"{PROG}: warning: {one_line(warning.message)}", file=sys.stderr)
+        else:
+            warnings.warn_explicit(
+                warning.message, warning.category, warning.filename, warning.lineno
+            )
+    return data
 
 
 def data_options(args) -> dict:

@@ -6,6 +6,7 @@ from .control import (
 )
 from .csv import read_csv as read_csv, write_csv as write_csv
 from .json_file import parse_json as parse_json, read_json as read_json
+from .preamble import MetadataConflictWarning as MetadataConflictWarning
 from .protocol_file import ProtocolFile as ProtocolFile, read_protocol as read_protocol
 from .raw import read_test as read_test
 from .slack import (

@@ -13,29 +13,10 @@ from typing import NamedTuple
 import numpy as np
 
 from .slack import force_noise as noise_std
+from .vocabulary import CONTROL_WORDS
 
 
 CONTROLS = ("force", "elongation")
-
-# Names a file (or a user) may give in a `# control:` line, and what they mean.
-_SYNONYMS = {
-    "force": "force",
-    "load": "force",
-    "stress": "force",
-    "force control": "force",
-    "load control": "force",
-    "elongation": "elongation",
-    "displacement": "elongation",
-    "extension": "elongation",
-    "position": "elongation",
-    "stroke": "elongation",
-    "strain": "elongation",
-    "crosshead": "elongation",
-    "displacement control": "elongation",
-    "position control": "elongation",
-    "extension control": "elongation",
-    "strain control": "elongation",
-}
 
 # The detection's windows: the history is cut into this many blocks of samples (fewer
 # for a short history, so that a block has _MIN_BLOCK samples).
@@ -65,13 +46,17 @@ def control_name(value: str, place: str) -> str:
 
     `ValueError` starting with `place` for any other value.
     """
-    key = " ".join(str(value).strip().lower().replace("_", " ").split())
-    if key not in _SYNONYMS:
-        raise ValueError(
-            f"{place}: {value!r} is not a control mode; use 'force' (load control) or "
-            "'elongation' (displacement, extension or position control)."
-        )
-    return _SYNONYMS[key]
+    words = str(value).strip().lower().replace("_", " ").split()
+    if words and words[-1] == "control":
+        words = words[:-1]
+    key = " ".join(words)
+    for mode, vocabulary in CONTROL_WORDS.items():
+        if key in vocabulary:
+            return mode
+    raise ValueError(
+        f"{place}: {value!r} is not a control mode; use 'force' (load control) or "
+        "'elongation' (displacement, extension or position control)."
+    )
 
 
 class ControlDetection(NamedTuple):

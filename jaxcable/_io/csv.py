@@ -29,10 +29,10 @@ from .parsing import (
     metadata_value,
     parse_metadata,
     parse_rows,
-    read_lines,
     split_cells,
 )
 from .testdata import TestData, where
+from .text import read_lines
 from .units import COLUMNS, QUANTITIES, written_name
 
 

@@ -1,11 +1,10 @@
 """The parser shared by [`jaxcable.read_csv`][] and [`jaxcable.read_test`][]: a file's
-lines (decoded), its `# key: value` metadata block, the column map (file column ->
-canonical quantity and unit factor), the numeric rows, and their assembly into a
-[`jaxcable.TestData`][] in SI. Every error names the file, line and column."""
+`# key: value` metadata block, the column map (file column -> canonical quantity and
+unit factor), the numeric rows, and their assembly into a [`jaxcable.TestData`][] in
+SI (the lines come from `text.py`). Every error names the file, line and column."""
 
 import csv
 import math
-import re
 from typing import NamedTuple
 
 import numpy as np
@@ -30,63 +29,6 @@ def _show(cell, limit: int = 40) -> str:
         if len(text) <= limit
         else repr(text[:limit]) + f"... ({len(text)} characters)"
     )
-
-
-# Tried in order when no encoding is given. utf-8-sig: spreadsheet programs prepend a
-# byte-order mark. gb18030 (a superset of GBK): Chinese tensile testers' headers.
-# latin-1 decodes any bytes, so a header in an unknown encoding never stops a file
-# whose numbers are ASCII.
-_ENCODINGS = ("utf-8-sig", "gb18030", "latin-1")
-
-
-def _decode(raw: bytes) -> str:
-    """`raw` decoded with the first of `_ENCODINGS` that decodes it."""
-    for candidate in _ENCODINGS[:-1]:
-        try:
-            return raw.decode(candidate)
-        except UnicodeDecodeError:
-            continue
-    return raw.decode(_ENCODINGS[-1])
-
-
-def _read_text(path, encoding: str | None = None) -> str:
-    """The file's text, decoded with `encoding`, else with the first of `_ENCODINGS`
-    that decodes it whole, else line by line."""
-    with open(path, "rb") as f:
-        raw = f.read()
-    if encoding is None:
-        for candidate in _ENCODINGS[:-1]:
-            try:
-                return raw.decode(candidate)
-            except UnicodeDecodeError:
-                continue
-        # Mixed encodings (a GBK header, a stray byte in a row): decoded whole as
-        # latin-1, the header would turn to mojibake and its columns go unmatched;
-        # line by line, the header keeps its encoding and the stray byte's row is
-        # reported. Line ends are the same bytes in all of `_ENCODINGS`.
-        return "".join(map(_decode, re.split(rb"(\r\n|\r|\n)", raw)))
-    try:
-        text = raw.decode(encoding)
-    except LookupError:
-        raise ValueError(f"{path}: unknown encoding {encoding!r}.") from None
-    except UnicodeDecodeError as e:
-        line = raw.count(b"\n", 0, e.start) + 1
-        raise ValueError(
-            f"{where(path, line)}: cannot be decoded as {encoding} ({e.reason} at "
-            f"byte {e.start}); leave the encoding out to have it detected."
-        ) from None
-    return text.removeprefix("\ufeff")
-
-
-def read_lines(path, encoding: str | None = None) -> list[str]:
-    """The lines of the file, decoded (see `_read_text`), without line ends."""
-    # Split on CR, LF and CRLF only: str.splitlines also splits on characters such as
-    # U+0085, which a header decoded as latin-1 may hold, and would shift the line
-    # numbers of error messages.
-    lines = re.split(r"\r\n|\r|\n", _read_text(path, encoding))
-    if lines and lines[-1] == "":
-        lines.pop()
-    return lines
 
 
 def metadata_value(key: str, value, place: str) -> float | str:

@@ -12,8 +12,8 @@ from .parsing import (
     metadata_value,
     parse_metadata,
     parse_rows,
-    read_lines,
 )
+from .preamble import merge, read_block
 from .sniff import (
     data_above,
     data_below_header,
@@ -22,6 +22,7 @@ from .sniff import (
     sniff_separator,
 )
 from .testdata import TestData, mask_slack
+from .text import read_lines
 from .units import COLUMNS, IGNORE, accepted_names, missing_quantities
 
 
@@ -102,7 +103,22 @@ def read_test(
         e.g. 时间, 力, 位移), with units in the name (`Force (kN)`, `Time/s`) or in a
         units row below (`(s),(mm),(N)`); a crosshead displacement is read as the
         elongation, and unmatched columns are ignored. Otherwise it is an error
-        asking for `columns` (`--columns`).
+        naming the columns found and what each was read as, asking for `columns`
+        (`--columns`).
+    - *Instrument exports* read as they come (header words, units, metadata labels
+        in `jaxcable/_io/vocabulary.py`): Instron Bluehill (`Specimen properties :
+        Length,"14.33000",mm`, `Test : Rate 1,"5.00000",mm/min`, `Extension,Load,
+        Tensile stress,Time` over `(mm),(N),(MPa),(s)`), Zwick testXpert
+        (`;`-separated, decimal commas, `Einspannlänge;100,0;mm`,
+        `Standardkraft;Standardweg;Prüfzeit` or `Standard force;Grip to grip
+        separation;Test time` over `N;mm;s`), MTS TestSuite (tab-separated `Time`,
+        `Axial Displacement`/`Crosshead`, `Axial Force`/`Load` over `sec mm N`),
+        Shimadzu Trapezium (`Time,Force,Stroke` over `sec,N,mm`). Units: s, ms, min,
+        h; N, kN, lbf, kgf; mm, cm, m, in. The metadata lines above the header
+        (label, number, unit, in any order) give `length_mm`, `diameter_mm` and
+        `rate_mm_per_min` (from m, cm, mm, in; mm/min, mm/s, m/min, m/s, in/min);
+        a line stating the control mode (`Position control`, `Control mode,Load`,
+        `Kraftregelung`) sets `control` to "elongation" or "force".
     - *Slack* (`detect_slack`): stretches where the force is about zero while the
         crosshead moves are masked, and negative forces clipped to 0; see
         [`jaxcable.mask_slack`][] for the rule. The result is in `mask`,
@@ -113,15 +129,18 @@ def read_test(
     - `path`: the file.
     - `columns`: the file's columns in order, e.g. `"time_s,elongation_mm,force_N"`
         (a string or a sequence of names). Accepted: `time_s`, `time_ms`, `time_min`,
-        `time_h`, `force_N`, `force_kN`, `elongation_mm`, `elongation_m`,
+        `time_h`, `force_N`, `force_kN`, `force_lbf`, `force_kgf`,
+        `elongation_mm`, `elongation_cm`, `elongation_m`, `elongation_in`,
         `temperature_C`, and `-` for a column to ignore (not parsed). Time and force
         are required.
     - `skip_rows`: the number of lines before the first data row, counted from the
         top of the file (blank, metadata, preamble, header and unit lines alike);
         `None` to detect it.
     - `length_mm`, `diameter_mm`, `rate_mm_per_min`, `temperature_C`, `material`,
-        `id`: metadata that replace the file's (mm, mm, mm/min, °C). `length_mm` is
-        required, from the file or here.
+        `id`: metadata that replace the file's (mm, mm, mm/min, °C); where one
+        differs from the file's by more than rounding (0.1 %), a
+        [`jaxcable.MetadataConflictWarning`][] names both (the command line prints
+        it as one line). `length_mm` is required, from the file or here.
     - `encoding`: the file's encoding, or `None` to detect it.
     - `delimiter`: the cell separator, or `None` to detect it.
     - `detect_slack`: whether to detect and mask slack stretches.
@@ -141,7 +160,8 @@ def read_test(
     included: remove them from the file), a header that names no time and force
     column, a numeric metadata value (`length_mm`, `diameter_mm`,
     `rate_mm_per_min`, `temperature_C`, `breaking_load_N`) that is not a finite
-    number the [`jaxcable.Cable`][] accepts, or no `length_mm`.
+    number the [`jaxcable.Cable`][] accepts, or no `length_mm`; an instrument
+    metadata line without a known unit, unless its value is given here.
     """
     lines = read_lines(path, encoding)
     metadata, first = parse_metadata(lines, path)
@@ -153,9 +173,11 @@ def read_test(
         "material": material,
         "id": id,
     }
-    for key, value in overrides.items():
-        if value is not None:
-            metadata[key] = metadata_value(key, value, f"{path}, argument {key}")
+    given = {
+        key: metadata_value(key, value, f"{path}, argument {key}")
+        for key, value in overrides.items()
+        if value is not None
+    }
     if delimiter is None:
         sep, decimal_comma = sniff_separator(lines, first)
     else:
@@ -194,6 +216,8 @@ def read_test(
         named_by = "columns"
         if skip_rows is None:
             start = data_above(lines, first, start, sep, decimal_comma, spec)
+    block = read_block(lines, first, start, sep, decimal_comma)
+    metadata = merge(path, lines, first, metadata, block, given)
     values, line_numbers = parse_rows(
         lines, start, column_map, path, sep, decimal_comma, named_by
     )

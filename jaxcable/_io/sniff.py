@@ -6,7 +6,8 @@ import re
 
 from .parsing import ColumnMap, map_columns, parse_number, row_cells
 from .testdata import where
-from .units import COLUMNS, IGNORE, missing_quantities
+from .units import COLUMNS, IGNORE, missing_quantities, written_name
+from .vocabulary import HEADER_UNITS, HEADER_WORDS, UNIT_SPELLINGS
 
 
 _SEPARATORS = {",": "comma", ";": "semicolon", "\t": "tab"}
@@ -15,43 +16,7 @@ _COLUMNS_HINT = (
     "order with their units, e.g. 'time_s,elongation_mm,force_N' ('-' for a column "
     "to ignore)"
 )
-# Header words (lower case) for each quantity, for the best-effort header match. A
-# crosshead displacement is the cable's elongation when it starts at zero with the
-# test, as tensile testers zero it.
-_HEADER_WORDS = {
-    "time": ("time", "zeit", "temps", "tiempo", "时间", "時間"),
-    "force": ("force", "load", "kraft", "力", "负荷", "負荷", "载荷", "荷重"),
-    "elongation": (
-        "elongation",
-        "extension",
-        "displacement",
-        "stroke",
-        "crosshead",
-        "deformation",
-        "weg",
-        "位移",
-        "伸长",
-        "变形",
-        "行程",
-    ),
-    "temperature": ("temperature", "temp", "temperatur", "温度"),
-}
-# (quantity, unit as written, lower case) -> canonical column name.
-_HEADER_UNITS = {
-    **{("time", u): "time_s" for u in ("s", "sec", "secs", "second", "seconds", "秒")},
-    ("time", "ms"): "time_ms",
-    **{("time", u): "time_min" for u in ("min", "mins", "minute", "minutes", "分钟")},
-    **{("time", u): "time_h" for u in ("h", "hr", "hrs", "hour", "hours", "小时")},
-    ("force", "n"): "force_N",
-    ("force", "kn"): "force_kN",
-    ("elongation", "mm"): "elongation_mm",
-    ("elongation", "m"): "elongation_m",
-    **{
-        ("temperature", u): "temperature_C"
-        for u in ("c", "°c", "℃", "degc", "deg c", "celsius")
-    },
-}
-_ALL_UNITS = {unit for _, unit in _HEADER_UNITS}
+_QUANTITY_UNITS = {unit for _, unit in HEADER_UNITS}
 # The brackets of `Name (unit)`, `Name [unit]`, also full-width.
 _OPENING = "([（【"
 _CLOSING = ")]）】"
@@ -136,21 +101,34 @@ def _split_unit(cell: str) -> tuple[str, str | None]:
     for mark in ("/", "_", " "):
         if mark in cell:
             name, unit = cell.rsplit(mark, 1)
-            if unit.strip().lower() in _ALL_UNITS:
+            if unit.strip().lower() in _QUANTITY_UNITS:
                 return name.strip(), unit.strip()
     return cell, None
 
 
 def _unit_cell(cell: str) -> str | None:
-    """The unit of a units-row cell (`(mm)`, `[s]`, `N`), or None if it is not one."""
-    bare = cell.strip().strip("()[]（）【】").strip()
-    return bare if bare.lower() in _ALL_UNITS else None
+    """The unit of a units-row cell (`(mm)`, `[s]`, `N`, `(MPa)`), or None if it is
+    not one: a unit spelling instruments write, or any word without digits in
+    brackets (a units row names the units of columns that are not read too)."""
+    cell = cell.strip()
+    bare = cell.strip("()[]（）【】").strip()
+    if bare.lower() in UNIT_SPELLINGS:
+        return bare
+    bracketed = len(bare) < len(cell) and cell[0] in _OPENING and cell[-1] in _CLOSING
+    if (
+        bracketed
+        and len(bare) <= 16
+        and not any(ch.isdigit() for ch in bare)
+        and (_NON_NUMBER_WORD.search(bare) or "%" in bare)
+    ):
+        return bare
+    return None
 
 
 def _header_quantity(name: str) -> str | None:
     lowered = name.lower()
     words = set(re.split(r"[\W_]+", lowered))
-    for quantity, vocabulary in _HEADER_WORDS.items():
+    for quantity, vocabulary in HEADER_WORDS.items():
         for word in vocabulary:
             if (word.isascii() and word in words) or (
                 not word.isascii() and word in lowered
@@ -167,10 +145,14 @@ def _match_header(
     **Returns:**
 
     `(columns, why)`: the column map (unmatched columns ignored), or `None` and why
-    the header does not do.
+    the header does not do: what each column was read as, and a `columns` value
+    that would read it.
     """
     mapped: list[ColumnMap] = []
     seen: dict[str, str] = {}
+    found: list[str] = []
+    guess: list[str] = []
+    problem = ""
     for position, cell in enumerate(names, start=1):
         name, unit = _split_unit(cell)
         if unit is None and units is not None and position <= len(units):
@@ -178,19 +160,55 @@ def _match_header(
         quantity = _header_quantity(name)
         token = None
         if quantity is not None and unit is not None:
-            token = _HEADER_UNITS.get((quantity, unit.lower()))
+            token = HEADER_UNITS.get((quantity, unit.lower()))
+        found.append(f"{_show(cell)} ({_read_as(quantity, unit, token)})")
         if token is None:
             mapped.append(ColumnMap(cell or IGNORE, IGNORE, 1.0, position))
+            guess.append(
+                written_name(quantity)
+                if quantity is not None and quantity not in seen
+                else IGNORE
+            )
             continue
-        if quantity in seen:
-            return None, f"two {quantity} columns ('{seen[quantity]}' and '{cell}')"
-        seen[quantity] = cell
+        guess.append(token)
+        if quantity in seen and not problem:
+            problem = f"two {quantity} columns ('{seen[quantity]}' and '{cell}')"
+        seen.setdefault(quantity, cell)
         unit_info = COLUMNS[token]
         mapped.append(ColumnMap(token, quantity, unit_info.to_si, position))
     missing = missing_quantities(seen)
-    if missing:
-        return None, f"no {' and no '.join(missing)} column with a known unit"
-    return mapped, ""
+    if missing and not problem:
+        problem = f"no {' and no '.join(missing)} column with a known unit"
+    if not problem:
+        return mapped, ""
+    shown = found[:_SHOWN_COLUMNS]
+    if len(found) > _SHOWN_COLUMNS:
+        shown.append(f"... ({len(found)} columns)")
+    suggestion = ",".join(guess[:_SHOWN_COLUMNS])
+    return None, (
+        f"{problem}; found {', '.join(shown)}"
+        + (f"; for this file perhaps columns='{suggestion}'" if seen else "")
+    )
+
+
+# The columns listed in the error about a header that does not do.
+_SHOWN_COLUMNS = 12
+
+
+def _show(cell: str) -> str:
+    """A header cell as quoted in an error message, cut to 30 characters."""
+    return repr(cell) if len(cell) <= 30 else repr(cell[:30] + "...")
+
+
+def _read_as(quantity: str | None, unit: str | None, token: str | None) -> str:
+    """What a header column was read as, for the error about the header."""
+    if token is not None:
+        return token
+    if quantity is None:
+        return "not recognised"
+    if unit is None:
+        return f"{quantity}, no unit"
+    return f"{quantity}, unit {_show(unit)} unknown"
 
 
 def header_columns(
@@ -233,8 +251,8 @@ def header_columns(
         reasons.append((index, names, why))
     index, names, why = reasons[0] if reasons else (rows[-1][0], rows[-1][1], "")
     raise ValueError(
-        f"{where(path, index + 1)}: cannot tell the columns from the header "
-        f"{_SEPARATORS[sep]}-separated {names}{f' ({why})' if why else ''}; "
+        f"{where(path, index + 1)}: cannot tell the columns from this "
+        f"{_SEPARATORS[sep]}-separated header{f' ({why})' if why else ''}; "
         f"{_COLUMNS_HINT}."
     )
 

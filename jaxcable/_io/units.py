@@ -26,8 +26,12 @@ COLUMNS: dict[str, Unit] = {
     "time_h": Unit("time", 3600.0),
     "force_N": Unit("force", 1.0),
     "force_kN": Unit("force", 1e3),
+    "force_lbf": Unit("force", 4.4482216152605),  # the pound-force, exactly
+    "force_kgf": Unit("force", 9.80665),  # the kilogram-force, exactly
     "elongation_mm": Unit("elongation", 1e-3),
+    "elongation_cm": Unit("elongation", 1e-2),
     "elongation_m": Unit("elongation", 1.0),
+    "elongation_in": Unit("elongation", 0.0254),
     "temperature_C": Unit("temperature", 1.0),
 }
 QUANTITIES = ("time", "force", "elongation", "temperature")

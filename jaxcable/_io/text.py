@@ -1,0 +1,90 @@
+"""A test file's lines: its bytes decoded with the encoding given, else detected
+(UTF-8, GB18030 for Chinese testers' headers, Windows-1252 for Western European
+ones, latin-1 for anything else), split at CR, LF and CRLF only."""
+
+import re
+
+from .testdata import where
+
+
+# Tried in order when no encoding is given. utf-8-sig: spreadsheet programs prepend a
+# byte-order mark. gb18030 (a superset of GBK): Chinese tensile testers' headers.
+# latin-1 decodes any bytes, so a header in an unknown encoding never stops a file
+# whose numbers are ASCII.
+_ENCODINGS = ("utf-8-sig", "gb18030", "latin-1")
+
+
+def _decode(raw: bytes) -> str:
+    """`raw` decoded with the first of `_ENCODINGS` that decodes it."""
+    for candidate in _ENCODINGS[:-1]:
+        try:
+            return _decode_as(raw, candidate)
+        except UnicodeDecodeError:
+            continue
+    return raw.decode(_ENCODINGS[-1])
+
+
+# The non-letters of Western European instrument exports (units, `Temp. (°C)`).
+_LATIN_SYMBOLS = frozenset("°µ²³·±")
+
+
+def _decode_as(raw: bytes, encoding: str) -> str:
+    """`raw.decode(encoding)`, but for GB18030 text that is rather Windows-1252
+    (`Prüfzeit`, `Einspannlänge` of a Zwick export decode as GB18030 too, to rare
+    characters): then Windows-1252."""
+    text = raw.decode(encoding)
+    if encoding != "gb18030" or text.isascii():
+        return text
+    chinese = {ch for ch in text if not ch.isascii()}
+    try:
+        "".join(chinese).encode("gb2312")  # the common characters: Chinese it is
+        return text
+    except UnicodeEncodeError:
+        pass
+    try:
+        latin = raw.decode("cp1252")
+    except UnicodeDecodeError:
+        return text
+    if all(ch.isalpha() or ch in _LATIN_SYMBOLS for ch in set(latin) if ord(ch) > 127):
+        return latin
+    return text
+
+
+def _read_text(path, encoding: str | None = None) -> str:
+    """The file's text, decoded with `encoding`, else with the first of `_ENCODINGS`
+    that decodes it whole, else line by line."""
+    with open(path, "rb") as f:
+        raw = f.read()
+    if encoding is None:
+        for candidate in _ENCODINGS[:-1]:
+            try:
+                return _decode_as(raw, candidate)
+            except UnicodeDecodeError:
+                continue
+        # Mixed encodings (a GBK header, a stray byte in a row): decoded whole as
+        # latin-1, the header would turn to mojibake and its columns go unmatched;
+        # line by line, the header keeps its encoding and the stray byte's row is
+        # reported. Line ends are the same bytes in all of `_ENCODINGS`.
+        return "".join(map(_decode, re.split(rb"(\r\n|\r|\n)", raw)))
+    try:
+        text = raw.decode(encoding)
+    except LookupError:
+        raise ValueError(f"{path}: unknown encoding {encoding!r}.") from None
+    except UnicodeDecodeError as e:
+        line = raw.count(b"\n", 0, e.start) + 1
+        raise ValueError(
+            f"{where(path, line)}: cannot be decoded as {encoding} ({e.reason} at "
+            f"byte {e.start}); leave the encoding out to have it detected."
+        ) from None
+    return text.removeprefix("\ufeff")
+
+
+def read_lines(path, encoding: str | None = None) -> list[str]:
+    """The lines of the file, decoded (see `_read_text`), without line ends."""
+    # Split on CR, LF and CRLF only: str.splitlines also splits on characters such as
+    # U+0085, which a header decoded as latin-1 may hold, and would shift the line
+    # numbers of error messages.
+    lines = re.split(r"\r\n|\r|\n", _read_text(path, encoding))
+    if lines and lines[-1] == "":
+        lines.pop()
+    return lines

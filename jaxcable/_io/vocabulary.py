@@ -1,0 +1,190 @@
+"""What tensile testers write, in one place: the words of their column headers and
+the spellings of their units (read best-effort by `sniff.py`), and the labels and
+units of their metadata lines and the words naming their control mode (read by
+`preamble.py`). The canonical names these map to are in `units.py`.
+
+Layouts known (each a header, maybe a units row, maybe metadata lines above it):
+
+- Instron Bluehill: `Specimen properties : Length,"14.33000",mm`, `Test : Rate
+    1,"5.00000",mm/min`, `Extension,Load,Tensile stress,Time` over `(mm),(N),(MPa),(s)`.
+- Zwick testXpert: `;`-separated with decimal commas, `Einspannlänge;100,0;mm`,
+    `Standardkraft;Standardweg;Prüfzeit` (or `Standard force;Grip to grip
+    separation;Test time`) over `N;mm;s`.
+- MTS TestSuite: tab-separated `Time`, `Axial Displacement`/`Crosshead`, `Axial
+    Force`/`Load` over `sec mm N` (or `s mm kN`).
+- Shimadzu Trapezium: `Time,Force,Stroke` (試験時間, 試験力, ストローク) over `sec,N,mm`.
+"""
+
+# Header words (lower case) for each quantity. A word of ASCII letters matches a
+# whole word of the header cell (`load` in `Axial load`, not in `Download`); any
+# other word matches anywhere in it (力 in 试验力, `prüfzeit`). A crosshead
+# displacement is the cable's elongation when it starts at zero with the test, as
+# tensile testers zero it; "strain" counts only in a length unit (Zwick writes the
+# crosshead travel as `Strain` in mm): in % or mm/mm it is no elongation.
+HEADER_WORDS = {
+    "time": ("time", "zeit", "prüfzeit", "temps", "tiempo", "时间", "時間"),
+    "force": (
+        "force",
+        "load",
+        "kraft",
+        "standardkraft",
+        "prüfkraft",
+        "力",
+        "负荷",
+        "負荷",
+        "载荷",
+        "荷重",
+    ),
+    "elongation": (
+        "elongation",
+        "extension",
+        "displacement",
+        "stroke",
+        "crosshead",
+        "deformation",
+        "separation",  # Zwick's "Grip to grip separation"
+        "strain",
+        "traverse",
+        "traversenweg",
+        "weg",
+        "standardweg",
+        "位移",
+        "伸长",
+        "变形",
+        "行程",
+        "ストローク",
+    ),
+    "temperature": ("temperature", "temp", "temperatur", "温度"),
+}
+# (quantity, unit as written, lower case) -> canonical column name (`units.COLUMNS`).
+HEADER_UNITS = {
+    **{("time", u): "time_s" for u in ("s", "sec", "secs", "second", "seconds", "秒")},
+    ("time", "ms"): "time_ms",
+    ("time", "msec"): "time_ms",
+    **{("time", u): "time_min" for u in ("min", "mins", "minute", "minutes", "分钟")},
+    **{("time", u): "time_h" for u in ("h", "hr", "hrs", "hour", "hours", "小时")},
+    ("force", "n"): "force_N",
+    ("force", "kn"): "force_kN",
+    ("force", "lbf"): "force_lbf",
+    ("force", "lb"): "force_lbf",
+    ("force", "kgf"): "force_kgf",
+    ("elongation", "mm"): "elongation_mm",
+    ("elongation", "cm"): "elongation_cm",
+    ("elongation", "m"): "elongation_m",
+    ("elongation", "in"): "elongation_in",
+    ("elongation", "inch"): "elongation_in",
+    **{
+        ("temperature", u): "temperature_C"
+        for u in ("c", "°c", "℃", "degc", "deg c", "celsius")
+    },
+}
+# Units of the other columns instruments write (stress, strain, energy), lower case:
+# a row of units under the header holds them too.
+OTHER_UNITS = frozenset(
+    (
+        "mpa",
+        "gpa",
+        "kpa",
+        "pa",
+        "psi",
+        "ksi",
+        "n/mm²",
+        "n/mm^2",
+        "n/mm2",
+        "%",
+        "mm/mm",
+        "in/in",
+        "j",
+        "nm",
+        "n·m",
+        "mm/min",
+        "mm/s",
+        "n/s",
+        "kn/s",
+        "hz",
+        "v",
+        "mm²",
+        "mm^2",
+        "-",
+    )
+)
+UNIT_SPELLINGS = frozenset(unit for _, unit in HEADER_UNITS) | OTHER_UNITS
+
+# Metadata lines above the header: the label (lower case, after the last `:` of its
+# first cell and without a trailing number, `Test : Rate 1` -> `rate`) -> the
+# canonical key, most specific first: where several labels of one key are in a
+# file, the first listed is used.
+METADATA_LABELS = {
+    "length_mm": (
+        "free length",
+        "specimen length",
+        "length",
+        "einspannlänge",
+        "probenlänge",
+        "länge",
+        "grip to grip separation",
+        "grip separation",
+        "initial grip separation",
+        "gauge length",
+        "messlänge",
+        "長さ",
+        "长度",
+    ),
+    "diameter_mm": (
+        "diameter",
+        "specimen diameter",
+        "durchmesser",
+        "probendurchmesser",
+        "直径",
+    ),
+    "rate_mm_per_min": (
+        "rate",
+        "test rate",
+        "test speed",
+        "crosshead speed",
+        "speed",
+        "prüfgeschwindigkeit",
+        "geschwindigkeit",
+        "試験速度",
+        "速度",
+    ),
+}
+# Unit as written (lower case) -> factor to the key's unit (mm, mm/min).
+LENGTH_UNITS = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4, "inch": 25.4}
+RATE_UNITS = {
+    "mm/min": 1.0,
+    "mm/s": 60.0,
+    "mm/sec": 60.0,
+    "m/min": 1000.0,
+    "m/s": 60_000.0,
+    "in/min": 25.4,
+    "in/s": 25.4 * 60,
+}
+METADATA_UNITS = {
+    "length_mm": LENGTH_UNITS,
+    "diameter_mm": LENGTH_UNITS,
+    "rate_mm_per_min": RATE_UNITS,
+}
+
+# A line naming the control mode has one of CONTROL_MARKS and words of one mode's
+# family (lower case; whole words, German compounds by prefix): `Control mode,
+# Position`, `Extension control`, `Kraftregelung`.
+CONTROL_MARKS = ("control", "regelung", "geregelt", "制御", "控制")
+CONTROL_WORDS = {
+    "elongation": (
+        "extension",
+        "displacement",
+        "position",
+        "stroke",
+        "crosshead",
+        "strain",
+        "elongation",
+        "weg",
+        "lage",
+        "traverse",
+        "dehnung",
+        "位移",
+        "ストローク",
+    ),
+    "force": ("load", "force", "stress", "kraft", "荷重", "力"),
+}
