@@ -217,3 +217,51 @@ def test_mixed_fit_recovers_the_parameters(seed):
         np.isnan(result.rmse_mm[2:])
     )
     assert np.all(np.isfinite(result.rmse_N[2:]))
+
+
+def test_cli_fit_and_simulate_with_the_elongation_drive(
+    displacement_tests, displacement_fit, tmp_path, capsys
+):
+    """`jaxcable fit` reads each file's drive and fits it; `jaxcable simulate --params
+    --drive elongation` fills in force_N, whose residual is the fit's."""
+    from jaxcable._cli.main import main
+
+    files = []
+    for i, (data, _) in enumerate(displacement_tests):
+        path = tmp_path / f"t{i}.csv"
+        jc.write_csv(path, data)
+        files.append(str(path))
+    params = tmp_path / "p.json"
+    start = tmp_path / "start.json"
+    start.write_text(json.dumps({k: float(getattr(START, k)) for k in TRUE}))
+    argv = ["fit", *files, "--model", "burgers", "--out", str(params), "--quiet"]
+    argv += ["--params", str(start)]
+    assert main(argv + ["--starts", "1"]) == 0
+    out = capsys.readouterr().out
+    assert "drive: elongation (the file's 'control' line)" in out
+    fitted = jc.FitResult.from_json(params)
+    # The command line masks the slack samples (the clipped zero forces at the end
+    # of the constant-rate test) that the API fit above kept.
+    np.testing.assert_allclose(fitted.rmse_N, displacement_fit.rmse_N, rtol=0.2)
+    read = jc.read_test(files[0])
+    # The measured history without its forces: simulate fills them in.
+    bare = tmp_path / "bare.csv"
+    bare.write_text(
+        "# length_mm: 200\n# diameter_mm: 3\ntime_s,elongation_mm\n"
+        + "".join(
+            f"{float(t)!r},{1e3 * float(e)!r}\n"
+            for t, e in zip(
+                displacement_tests[0][0].time, displacement_tests[0][0].elongation
+            )
+        )
+    )
+    for source in (files[0], str(bare)):
+        out_csv = tmp_path / "sim.csv"
+        argv = ["simulate", source, "--params", str(params), "--out", str(out_csv)]
+        assert main(argv + ["--drive", "elongation"]) == 0
+        simulated = jc.read_csv(out_csv)
+        assert simulated.control == "elongation"
+        miss = (simulated.force - read.force)[read.mask]
+        np.testing.assert_allclose(
+            np.sqrt(np.mean(miss**2)), fitted.rmse_N[0], rtol=1e-6
+        )

@@ -219,7 +219,9 @@ def build_parser() -> argparse.ArgumentParser:
             "HISTORY.csv: a time-stamped force history in the canonical CSV format "
             "('# length_mm: ...'\nmetadata, then time_s,force_N[,...]); the same file "
             "is written with elongation_mm filled\nin (other columns and metadata "
-            "kept). The cable is taken from the metadata:\nlength_mm (required), "
+            "kept). With --drive elongation (or a '# control: elongation'\nline, or "
+            "no force_N column) it is an elongation history (time_s,elongation_mm) "
+            "and\nforce_N is filled in, solved sample by sample. The cable is taken from the metadata:\nlength_mm (required), "
             "diameter_mm (default 3) and rate_mm_per_min (default 3)."
         ),
     )
@@ -244,6 +246,7 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument(
         "--out", metavar="OUT.csv", required=True, help="the file to write"
     )
+    _add_drive_option(sim, "of a HISTORY.csv (elongation: force_N is filled in)")
     sim.set_defaults(run=simulate_command)
 
     fit = commands.add_parser(

@@ -8,8 +8,13 @@ from collections.abc import Callable
 import numpy as np
 
 from .._cable import Cable
-from .._drive import simulate_force_history, simulate_rate_test
-from .._io import TestData, read_csv, read_protocol, write_csv
+from .._drive import (
+    simulate_elongation_history,
+    simulate_force_history,
+    simulate_rate_test,
+)
+from .._io import TestData, read_protocol, resolve_control, write_csv
+from .._io.csv import read_canonical
 from .._results import RESULTS
 from .common import CliError, require_folder_of
 from .data import read_located
@@ -72,14 +77,44 @@ def _write(args, data: TestData) -> None:
         write_csv(tmp, data)
 
 
+def _history_drive(args) -> tuple[TestData, str]:
+    """The history file, read for its drive, and the drive: `--drive`, else the
+    file's `control` line, else the channel it has (detected when it has both)."""
+    data = read_located(read_canonical, args.input, overrides={}, required=("time",))
+    has_force = bool(np.all(np.isfinite(data.force)))
+    if args.drive != "auto" or data.control is not None:
+        drive = resolve_control(data, args.drive).control
+    elif data.elongation is None or not has_force:
+        drive = "force" if data.elongation is None else "elongation"
+    else:
+        drive = resolve_control(data, "auto").control
+    need = "force_N" if drive == "force" else "elongation_mm"
+    if drive == "force" and not has_force:
+        raise CliError(
+            f"{args.input}: a force-driven history needs a {need} column (or use "
+            "--drive elongation with an elongation_mm column)."
+        )
+    if drive == "elongation" and data.elongation is None:
+        raise CliError(
+            f"{args.input}: an elongation-driven history needs an {need} column."
+        )
+    return data, drive
+
+
 def _simulate_history(args) -> int:
-    data = read_located(read_csv, args.input)
+    data, drive = _history_drive(args)
     cable = data.cable()
-    _check_force(data, cable)
+    if drive == "force":
+        _check_force(data, cable)
     name, model = resolve_model(args, per_test_hint=_PER_TEST)
-    # The forces as read, as `fit` drives its model: a PARAMS.json re-simulates the
-    # file it was fitted to exactly as the fit saw it.
-    traj = simulate_force_history(model, cable, data.time, data.force, throw=False)
+    # The measured channel as read, as `fit` drives its model: a PARAMS.json
+    # re-simulates the file it was fitted to exactly as the fit saw it.
+    if drive == "force":
+        traj = simulate_force_history(model, cable, data.time, data.force, throw=False)
+    else:
+        traj = simulate_elongation_history(
+            model, cable, data.time, data.elongation, throw=False
+        )
     _check_success(
         traj, name, lambda i: str(args.input) if i is None else data.locate(i)
     )
@@ -88,13 +123,21 @@ def _simulate_history(args) -> int:
     metadata.setdefault("diameter_mm", float(cable.diameter) * 1e3)
     metadata.setdefault("rate_mm_per_min", float(cable.speed) * 1e3 * 60)
     metadata["model"] = name
+    metadata["control"] = drive
     if args.params:
         metadata["model_params"] = params_metadata(model)
-    out = dataclasses.replace(
-        data, elongation=np.asarray(traj.elongation), metadata=metadata
-    )
+    if drive == "force":
+        out = dataclasses.replace(
+            data, elongation=np.asarray(traj.elongation), metadata=metadata
+        )
+    else:
+        out = dataclasses.replace(data, force=np.asarray(traj.force), metadata=metadata)
     _write(args, out)
-    print(f"wrote {args.out} ({data.num_samples} samples, model '{name}')")
+    filled = "elongation_mm" if drive == "force" else "force_N"
+    print(
+        f"wrote {args.out} ({data.num_samples} samples, {filled} simulated by "
+        f"model '{name}', {drive} drive)"
+    )
     return 0
 
 

@@ -67,6 +67,14 @@ def read_csv(path: str | os.PathLike, **overrides: float | str) -> TestData:
     (in the file's unit or in seconds), a numeric metadata value that is not a
     finite number the [`jaxcable.Cable`][] accepts, or no `length_mm` metadata.
     """
+    return read_canonical(path, overrides)
+
+
+def read_canonical(
+    path, overrides, required: tuple[str, ...] = ("time", "force")
+) -> TestData:
+    """[`jaxcable.read_csv`][] with the `required` quantities (an elongation
+    history to simulate needs time and elongation, not force: its forces are NaN)."""
     lines = read_lines(path)
     metadata, header = parse_metadata(lines, path)
     if header == len(lines):
@@ -78,7 +86,7 @@ def read_csv(path: str | os.PathLike, **overrides: float | str) -> TestData:
         metadata[key] = metadata_value(key, value, f"{path}, argument {key}")
     header_line = header + 1
     names = [cell.strip() for cell in split_cells(lines[header], ",")]
-    columns = map_columns(names, path, header_line)
+    columns = map_columns(names, path, header_line, required=required)
     values, line_numbers = parse_rows(lines, header + 1, columns, path)
     return assemble(path, columns, values, line_numbers, metadata, header_line)
 

@@ -103,7 +103,11 @@ class ColumnMap(NamedTuple):
 
 
 def map_columns(
-    names: list[str], path, line: int, positions: bool = False
+    names: list[str],
+    path,
+    line: int,
+    positions: bool = False,
+    required: tuple[str, ...] = ("time", "force"),
 ) -> list[ColumnMap]:
     """Map the header's column names to canonical quantities and unit factors.
 
@@ -112,6 +116,7 @@ def map_columns(
     - `names`: the header cells, stripped.
     - `path`, `line`: file and 1-based line number of the header, for errors.
     - `positions`: whether error messages about the rows give column positions.
+    - `required`: the quantities that must have a column.
 
     **Returns:**
 
@@ -138,7 +143,7 @@ def map_columns(
             )
         seen[unit.quantity] = name
         mapped.append(ColumnMap(name, unit.quantity, unit.to_si, shown))
-    missing = missing_quantities(seen)
+    missing = missing_quantities(seen, required)
     if missing:
         quantity = missing[0]
         raise ValueError(
@@ -369,7 +374,8 @@ def assemble(
 ) -> TestData:
     """Build the [`jaxcable.TestData`][] of parsed rows: unit conversion, time and
     metadata checks (time strictly increasing in the file's unit and in seconds,
-    every value finite in SI units)."""
+    every value finite in SI units). A file without a force column (an elongation
+    history to simulate) gets NaN forces."""
     fields: dict[str, np.ndarray] = {}
     extra: dict[str, np.ndarray] = {}
     for position, column in enumerate(columns):
@@ -393,7 +399,7 @@ def assemble(
         )
     return TestData(
         time=fields["time"],
-        force=fields["force"],
+        force=fields.get("force", np.full(line_numbers.shape, np.nan)),
         elongation=fields.get("elongation"),
         temperature=fields.get("temperature"),
         extra=extra,

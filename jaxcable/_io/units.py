@@ -65,10 +65,10 @@ def written_name(quantity: str) -> str:
     return next(name for name, unit in COLUMNS.items() if unit.quantity == quantity)
 
 
-def missing_quantities(seen) -> list[str]:
-    """The required quantities (time, force) that are not keys of `seen`, the
-    quantities some column reads."""
-    return [quantity for quantity in _REQUIRED if quantity not in seen]
+def missing_quantities(seen, required: tuple[str, ...] = _REQUIRED) -> list[str]:
+    """The `required` quantities (default time and force) that are not keys of
+    `seen`, the quantities some column reads."""
+    return [quantity for quantity in required if quantity not in seen]
 
 
 def accepted_names(quantity: str) -> str:
