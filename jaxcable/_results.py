@@ -37,7 +37,8 @@ class RESULTS(eqx.Enumeration):
     )
     nonphysical_strain = (
         "The strain became non-finite (inf or NaN), or a sample's time or force was "
-        "solved at a strain above 1 (the cable at twice its length, beyond the "
+        "solved by the integrated model at a strain above 1 (the cable at twice its "
+        "length, beyond the "
         "breaking strain of any polymer cable and the range where the hardening "
         "law, Park Eq. 2, lets the strain determine the force): check the "
         "parameters' units and size."

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 import jaxcable as jc
+from jaxcable._papers import synthesize_history
 
 
 TRUTH = jc.BurgersModel(E1=2.0e9, eta0=3.0e11, E2=4.0e8, eta2=2.0e10)
@@ -30,42 +31,51 @@ def relaxation(strain: float, seed: int, control: str | None = "elongation"):
     """A ramp to `strain` in 20 s, held 600 s; force noise NOISE of the peak."""
     t = _times(20.0, 600.0)
     e = np.minimum(t / 20.0, 1.0) * strain * LENGTH_MM * 1e-3
-    f = np.asarray(jc.simulate_elongation_history(TRUTH, CABLE, t, e).force)
-    sigma = NOISE * f.max()
-    f = f + sigma * np.random.default_rng(seed).standard_normal(f.size)
-    metadata = {"length_mm": LENGTH_MM, "diameter_mm": 3.0, "id": f"relax-{strain}"}
-    if control:
-        metadata["control"] = control
-    return jc.TestData(t, np.clip(f, 0.0, None), e, metadata=metadata), sigma
+    data, sigma = synthesize_history(
+        TRUTH,
+        CABLE,
+        t,
+        e,
+        drive="elongation",
+        seed=seed,
+        metadata={"id": f"relax-{strain}"},
+    )
+    if control != "elongation":
+        data.metadata.pop("control")
+    return data, sigma
 
 
 def constant_rate(strain: float, seed: int):
     """A ramp up and down at a constant crosshead rate; force noise NOISE of the peak."""
     t = np.linspace(0.0, 200.0, SAMPLES)
     e = strain * LENGTH_MM * 1e-3 * (1.0 - np.abs(t / 100.0 - 1.0))
-    f = np.asarray(jc.simulate_elongation_history(TRUTH, CABLE, t, e).force)
-    sigma = NOISE * f.max()
-    f = f + sigma * np.random.default_rng(seed).standard_normal(f.size)
-    metadata = {
-        "length_mm": LENGTH_MM,
-        "diameter_mm": 3.0,
-        "id": f"rate-{strain}",
-        "control": "displacement",
-    }
-    return jc.TestData(t, np.clip(f, 0.0, None), e, metadata=metadata), sigma
+    return synthesize_history(
+        TRUTH,
+        CABLE,
+        t,
+        e,
+        drive="elongation",
+        seed=seed,
+        metadata={"id": f"rate-{strain}"},
+    )
 
 
 def creep(force: float, seed: int, control: str | None = "force"):
     """A force ramp in 10 s, held 900 s; elongation noise NOISE of the peak."""
     t = _times(10.0, 900.0)
     f = np.minimum(t / 10.0, 1.0) * force
-    e = np.asarray(jc.simulate_force_history(TRUTH, CABLE, t, f).elongation)
-    sigma = NOISE * e.max()
-    e = e + sigma * np.random.default_rng(seed).standard_normal(e.size)
-    metadata = {"length_mm": LENGTH_MM, "diameter_mm": 3.0, "id": f"creep-{force:g}"}
-    if control:
-        metadata["control"] = control
-    return jc.TestData(t, f, e, metadata=metadata), sigma
+    data, sigma = synthesize_history(
+        TRUTH,
+        CABLE,
+        t,
+        f,
+        drive="force",
+        seed=seed,
+        metadata={"id": f"creep-{force:g}"},
+    )
+    if control != "force":
+        data.metadata.pop("control")
+    return data, sigma
 
 
 @pytest.fixture(scope="module")

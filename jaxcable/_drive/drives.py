@@ -27,6 +27,7 @@ from .state import (
     init_state,
     sample_result,
     solved_result,
+    strain_limit,
 )
 
 
@@ -217,7 +218,7 @@ class RateDrive(AbstractDrive):
             unreachable=root.no_root,
             dt=dt,
         )
-        result = solved_result(result, parts.total)
+        result = solved_result(result, parts.total, strain_limit(model))
         return commit(
             state, model_state, parts, state.time + dt, force, result, sample.mask
         )
@@ -306,7 +307,7 @@ class ElongationDrive(AbstractDrive):
         result = sample_result(
             converged=unloaded | (root.converged & _verified(miss)), force=force
         )
-        result = solved_result(result, parts.total)
+        result = solved_result(result, parts.total, strain_limit(model))
         return commit(
             state, model_state, parts, sample.time, force, result, sample.mask
         )

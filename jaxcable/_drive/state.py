@@ -3,6 +3,8 @@
 first failure kept, padding samples skipped) and the [`jaxcable.Trajectory`][] that a
 simulation returns."""
 
+import math
+
 import equinox as eqx
 import jax.numpy as jnp
 import jax.tree_util as jtu
@@ -133,19 +135,30 @@ def sample_result(
     return result
 
 
-# The largest strain at which a sample's time or force is solved: a cable twice its
-# length. No polymer cable comes near it (UHMWPE breaks at about 0.035, polyester at
-# 0.15, nylon at 0.4), and beyond it the hardening law (Park Eq. 2,
-# h = 1 + beta eps**gamma, eps**gamma unbounded in gamma) makes the strain almost
-# independent of the force, so that a solved force or time would be one of many. A
-# force history, which is not inverted, is simulated at any strain.
-MAX_SOLVED_STRAIN = 1.0
+def strain_limit(model: AbstractCableModel) -> float:
+    """The largest strain at which a drive solves a sample's time or force for
+    `model` (an extension: for its base): the class variable `SOLVED_STRAIN_LIMIT`,
+    else no limit.
+
+    The integrated model sets 1, a cable twice its length: no polymer cable comes
+    near it (UHMWPE breaks at about 0.035, polyester at 0.15, nylon at 0.4), and
+    beyond it the hardening law (Park Eq. 2, h = 1 + beta eps**gamma, eps**gamma
+    unbounded in gamma) makes the strain almost independent of the force, so that a
+    solved force or time would be one of many. The linear and hysteretic baselines
+    (an elastomer stretched to 6 times its length in a relaxation test) have no such
+    limit. A force history, which is not inverted, is simulated at any strain.
+    """
+    while isinstance(getattr(model, "base", None), AbstractCableModel):
+        model = model.base
+    return float(getattr(type(model), "SOLVED_STRAIN_LIMIT", math.inf))
 
 
-def solved_result(result: RESULTS, strain: Float[Array, ""]) -> RESULTS:
+def solved_result(
+    result: RESULTS, strain: Float[Array, ""], limit: float = math.inf
+) -> RESULTS:
     """`result` of a solved sample, or `nonphysical_strain` where it was successful
-    but its strain is beyond `MAX_SOLVED_STRAIN`."""
-    ok = (jnp.abs(strain) <= MAX_SOLVED_STRAIN) | ~jnp.isfinite(strain)
+    but its strain is beyond `limit` (see `strain_limit`)."""
+    ok = (jnp.abs(strain) <= limit) | ~jnp.isfinite(strain)
     return RESULTS.where(
         ok | (result != RESULTS.successful), result, RESULTS.nonphysical_strain
     )

@@ -13,6 +13,8 @@ Eq. 6 (the crosshead's strain, strain rate times time) is the constraint with wh
 the rate-driven simulation solves for the loading time, not part of the model.
 """
 
+from typing import ClassVar
+
 import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, Float, Int
@@ -321,6 +323,11 @@ class IntegratedModel(AbstractCableModel[IntegratedState]):
     - `E3r`: long-term recovery modulus, Pa (Eq. 7).
     - `lambda1` (1/s), `lambda2` (s): long-term retardation time law (Eq. 8).
     """
+
+    # The drives solve a time or force only up to this strain (see
+    # `jaxcable._drive.state.strain_limit`): beyond it the hardening law (Eq. 2,
+    # eps**gamma) makes the strain almost independent of the force.
+    SOLVED_STRAIN_LIMIT: ClassVar[float] = 1.0
 
     E1c: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=2.597e9)
     beta: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.05465)

@@ -21,4 +21,5 @@ from .synthetic import (
     hidden_effect_model as hidden_effect_model,
     hidden_effect_protocol as hidden_effect_protocol,
     synthesize as synthesize,
+    synthesize_history as synthesize_history,
 )

@@ -6,7 +6,12 @@ import equinox as eqx
 import numpy as np
 
 from .._cable import Cable
-from .._drive import Protocol, simulate_rate_test
+from .._drive import (
+    Protocol,
+    simulate_elongation_history,
+    simulate_force_history,
+    simulate_rate_test,
+)
 from .._io import TestData
 from .._models import (
     EXTENSIONS,
@@ -85,6 +90,61 @@ def synthesize(
         temperature=temperature,
         metadata=meta,
     )
+
+
+def synthesize_history(
+    model: AbstractCableModel,
+    cable: Cable,
+    time: np.ndarray,
+    imposed: np.ndarray,
+    *,
+    drive: str,
+    seed: int,
+    relative_noise: float = 0.005,
+    metadata: dict | None = None,
+) -> tuple[TestData, float]:
+    """A force- or displacement-controlled test simulated by `model`, with white
+    noise on the measured (response) channel.
+
+    **Arguments:**
+
+    - `model`, `cable`: the truth.
+    - `time`: sample times, s.
+    - `imposed`: the imposed force (N, `drive="force"`: a creep test) or elongation
+        (m, `drive="elongation"`: relaxation, a constant crosshead rate).
+    - `drive`: `"force"` or `"elongation"`; written as the `control` metadata.
+    - `seed`: seed of the noise (NumPy `default_rng`).
+    - `relative_noise`: the noise standard deviation as a fraction of the response's
+        peak (0.5 %); forces stay >= 0.
+    - `metadata`: extra `# key: value` metadata.
+
+    **Returns:**
+
+    `(test, sigma)`: the [`jaxcable.TestData`][] and the noise standard deviation (m
+    or N).
+    """
+    time = np.asarray(time, float)
+    imposed = np.asarray(imposed, float)
+    rng = np.random.default_rng(seed)
+    meta = {
+        "length_mm": float(cable.length) * 1e3,
+        "diameter_mm": float(cable.diameter) * 1e3,
+        "control": drive,
+        **(metadata or {}),
+    }
+    if drive == "force":
+        clean = np.asarray(
+            simulate_force_history(model, cable, time, imposed).elongation
+        )
+        sigma = relative_noise * float(np.max(np.abs(clean)))
+        measured = clean + sigma * rng.standard_normal(time.size)
+        return TestData(time, imposed, measured, metadata=meta), sigma
+    if drive != "elongation":
+        raise ValueError(f"`drive` must be 'force' or 'elongation', got {drive!r}.")
+    clean = np.asarray(simulate_elongation_history(model, cable, time, imposed).force)
+    sigma = relative_noise * float(np.max(np.abs(clean)))
+    measured = np.clip(clean + sigma * rng.standard_normal(time.size), 0.0, None)
+    return TestData(time, measured, imposed, metadata=meta), sigma
 
 
 # The bundled data set: Park's protocol at two lengths, two crosshead speeds and two
