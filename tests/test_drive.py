@@ -275,3 +275,17 @@ def test_cli_fit_and_simulate_with_the_elongation_drive(
         np.testing.assert_allclose(
             np.sqrt(np.mean(miss**2)), fitted.rmse_N[0], rtol=1e-6
         )
+
+
+def test_a_start_that_fails_says_why():
+    """The integrated model solves no force beyond a strain of 1 (its hardening law);
+    a displacement-controlled test stretched past it is refused with that reason."""
+    t = np.linspace(0.0, 10.0, 12)
+    e = np.minimum(t / 5.0, 1.0) * 1.5 * 0.1  # to a strain of 1.5 on 100 mm
+    data = jc.TestData(
+        t, np.linspace(0.0, 100.0, 12), e, metadata={"length_mm": 100.0, "id": "far"}
+    )
+    with pytest.raises(
+        ValueError, match=r"tests\[0\] \(far, elongation-driven\).*above 1"
+    ):
+        jc.fit(jc.IntegratedModel(), [data], fit=["E1c"], drive="elongation")

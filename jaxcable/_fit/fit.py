@@ -20,7 +20,9 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import PRNGKeyArray
 
+from .._drive import simulate_elongation_history, simulate_force_history
 from .._models import AbstractCableModel
+from .._results import RESULTS
 from .data import (
     as_test_list,
     test_id,
@@ -59,17 +61,31 @@ def _checked_solver(multistart, max_steps, spread, solver) -> optx.AbstractGauss
     return solver
 
 
-def _require_valid_start(out: KernelOut, tests: list) -> None:
-    """Raise if the user's start does not simulate finitely on every test."""
+def _require_valid_start(out: KernelOut, tests: list, problem: Problem) -> None:
+    """Raise if the user's start does not simulate finitely on every test, with the
+    simulation's own reason (re-run for the first such test, by its drive)."""
     bad = np.flatnonzero(~np.asarray(out.start_ok))
-    if bad.size:
-        i = int(bad[0])
-        raise ValueError(
-            f"`model`: the start parameters fail on tests[{i}] "
-            f"({test_id(tests[i], i)}): the simulation is not finite or a "
-            "parameter is outside its domain for this cable (e.g. Park's t_r2 = "
-            "lambda1 (L0/v)^2 - lambda2 <= 0); give start values valid for every test."
+    if not bad.size:
+        return
+    i = int(bad[0])
+    test, drive = tests[i], problem.data.drive[i]
+    model = eqx.combine(problem.base, problem.static)
+    cable = test.cable()
+    if drive == "force":
+        traj = simulate_force_history(model, cable, test.time, test.force, throw=False)
+    else:
+        traj = simulate_elongation_history(
+            model, cable, test.time, test.elongation, throw=False
         )
+    reason = str(RESULTS[traj.result]) or (
+        "the simulation is not finite or a parameter is outside its domain for this "
+        "cable (e.g. Park's t_r2 = lambda1 (L0/v)^2 - lambda2 <= 0)"
+    )
+    raise ValueError(
+        f"`model`: the start parameters fail on tests[{i}] ({test_id(test, i)}, "
+        f"{drive}-driven): {reason.rstrip('.')}. Give start values valid for every "
+        "test."
+    )
 
 
 def _outcome(
@@ -274,7 +290,7 @@ def fit(
         key = jr.key(0)
     jac = "fwd" if p <= n else "bwd"
     out = fit_kernel(problem, u_user, key, solver, max_steps, jac, multistart, spread)
-    _require_valid_start(out, test_list)
+    _require_valid_start(out, test_list, problem)
     converged, message, ssr, stats = _outcome(out, layout.labels, n, throw)
     for text in stats.warnings:
         warnings.warn(text, IdentifiabilityWarning, stacklevel=2)
