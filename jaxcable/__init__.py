@@ -35,6 +35,7 @@ from ._fit import (
     PaddedTests as PaddedTests,
     fit as fit,
     make_loss as make_loss,
+    model_responses as model_responses,
     pad_tests as pad_tests,
     residuals as residuals,
 )

@@ -64,3 +64,44 @@ def read(path: pathlib.Path, samples: int = 200) -> jc.TestData:
 def paths() -> list[pathlib.Path]:
     """The test files, without the mislabelled one (`EXCLUDED`)."""
     return [p for p in sorted(FOLDER.glob("*.csv")) if p.name not in EXCLUDED]
+
+
+RELAXATION = SHARED / "data" / "vhb4910" / "relaxation"
+# The relaxation tests reach 3.7 N (stretch 6): a nominal breaking load above that.
+RELAXATION_BREAKING_LOAD = 4.0
+
+
+def read_relaxation(path: pathlib.Path, ramp: int = 40, hold: int = 80) -> jc.TestData:
+    """One relaxation test (a ramp at 20 mm/s to a stretch of 1.5-6, held 1800 s),
+    thinned to `ramp` samples evenly over the ramp and `hold` samples log-spaced over
+    the hold (the force relaxes on every time scale from 0.05 s to 30 min), with the
+    breaking load `RELAXATION_BREAKING_LOAD`. The files are read as they come; their
+    control (displacement) is detected from the data by `jaxcable.fit`."""
+    data = jc.read_test(
+        path,
+        columns="time_s,elongation_mm,force_N",
+        length_mm=GAUGE_MM,
+        id="relax_" + path.stem,
+    )
+    t, e = data.time, data.elongation
+    top = int(np.flatnonzero(e >= 0.999 * e.max())[0])
+    on_ramp = np.linspace(0, top, ramp).astype(int)
+    times = t[top] + np.geomspace(0.05, t[-1] - t[top], hold)
+    on_hold = np.clip(np.searchsorted(t, times), top + 1, t.size - 1)
+    i = np.unique(np.concatenate([on_ramp, on_hold]))
+    data = dataclasses.replace(
+        data,
+        time=t[i],
+        force=data.force[i],
+        elongation=e[i],
+        mask=data.mask[i],
+        lines=data.lines[i],
+        force_raw=None,
+    )
+    data.metadata["breaking_load_N"] = RELAXATION_BREAKING_LOAD
+    return data
+
+
+def relaxation_paths() -> list[pathlib.Path]:
+    """The relaxation files, by stretch."""
+    return sorted(RELAXATION.glob("*.csv"))

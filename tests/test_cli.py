@@ -437,11 +437,11 @@ def test_fit_report(burgers_fit):
         assert f"| {name} |" in summary
     assert "± std err" in summary and "## Identifiability" in summary
     rows = (report / "rmse.csv").read_text().splitlines()
-    assert rows[0] == "id,file,samples,masked,rmse_mm,rmse_percent"
+    assert rows[0] == "id,file,drive,samples,masked,rmse_mm,rmse_N,rmse_percent"
     for row, test_id, mm in zip(rows[1:], result.test_ids, result.rmse_mm):
         cells = row.split(",")
-        assert cells[0] == test_id
-        np.testing.assert_allclose(float(cells[4]), mm, rtol=1e-5)
+        assert cells[0] == test_id and cells[2] == "force" and cells[6] == ""
+        np.testing.assert_allclose(float(cells[5]), mm, rtol=1e-5)
 
 
 def test_fit_report_models_match_the_fit(burgers_fit):

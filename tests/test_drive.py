@@ -289,3 +289,28 @@ def test_a_start_that_fails_says_why():
         ValueError, match=r"tests\[0\] \(far, elongation-driven\).*above 1"
     ):
         jc.fit(jc.IntegratedModel(), [data], fit=["E1c"], drive="elongation")
+
+
+def test_report_of_a_displacement_controlled_fit(
+    displacement_tests, displacement_fit, tmp_path
+):
+    """The report plots the model's force at the measured elongation and tabulates
+    the force RMSE, for each elongation-driven test."""
+    from jaxcable._report import write_report
+
+    tests = [t for t, _ in displacement_tests]
+    written = write_report(tmp_path, displacement_fit, tests)
+    assert [p.name for p in written][:2] == ["fit_loops.png", "fit_residuals.png"]
+    rows = (tmp_path / "rmse.csv").read_text().splitlines()
+    assert rows[0] == "id,file,drive,samples,masked,rmse_mm,rmse_N,rmse_percent"
+    for row, rmse in zip(rows[1:], displacement_fit.rmse_N):
+        cells = row.split(",")
+        assert cells[2] == "elongation" and cells[5] == ""
+        np.testing.assert_allclose(float(cells[6]), rmse, rtol=1e-5)
+    summary = (tmp_path / "summary.md").read_text()
+    assert "N^2" in summary and "| elongation |" in summary
+    responses = jc.model_responses(displacement_fit, tests)
+    for test, force, rmse in zip(tests, responses, displacement_fit.rmse_N):
+        np.testing.assert_allclose(
+            np.sqrt(np.mean((force - test.force) ** 2)), rmse, rtol=1e-8
+        )

@@ -7,5 +7,6 @@ from .data import (
 )
 from .fit import fit as fit
 from .problem import make_loss as make_loss, residuals as residuals
+from .responses import model_responses as model_responses
 from .result import FitResult as FitResult
 from .statistics import IdentifiabilityWarning as IdentifiabilityWarning

@@ -10,9 +10,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from .._diagnose import model_elongations
 from .._files import write_text_atomic
-from .._fit import FitResult
+from .._fit import FitResult, model_responses
 from .._io import TestData
 from .._progress import Progress
 from .plots import plot_loops, plot_residuals
@@ -60,7 +59,8 @@ def summary_markdown(
         "",
         f"Model `{type(result.model).__name__}`, {len(result.test_ids)} test(s), "
         f"{n} fitted samples, {len(result.names)} fitted parameters; SSR "
-        f"{result.loss:.6g} m²; {status}; best of {len(result.start_losses)} "
+        f"{result.loss:.6g} {result.loss_unit}; {status}; best of "
+        f"{len(result.start_losses)} "
         "start(s).",
         "",
     ]
@@ -70,18 +70,22 @@ def summary_markdown(
     lines += [
         "## Error per test",
         "",
-        "RMSE of model minus measured elongation over the fitted samples; % of the "
-        "test's peak elongation.",
+        "RMSE of model minus measured value over the fitted samples, in the test's "
+        "scored channel (elongation of a force-driven test, force of an "
+        "elongation-driven one); % of the test's peak in that channel.",
         "",
-        "| test | file | samples | masked | RMSE [mm] | RMSE [%] |",
-        "| --- | --- | ---: | ---: | ---: | ---: |",
+        "| test | file | drive | samples | masked | RMSE | RMSE [%] |",
+        "| --- | --- | --- | ---: | ---: | ---: | ---: |",
     ]
     for i, test in enumerate(tests):
         source = pathlib.Path(test.source).name if test.source else ""
         masked = int(np.sum(~test.mask))
+        value, unit = result.rmse(i)
+        drive = result.drives[i] if result.drives else "force"
         lines.append(
-            f"| {result.test_ids[i]} | {source} | {int(result.num_samples[i])} | "
-            f"{masked} | {result.rmse_mm[i]:.4f} | {result.rmse_percent[i]:.2f} |"
+            f"| {result.test_ids[i]} | {source} | {drive} | "
+            f"{int(result.num_samples[i])} | {masked} | {value:.4g} {unit} | "
+            f"{result.rmse_percent[i]:.2f} |"
         )
     lines += [
         "",
@@ -132,7 +136,7 @@ def write_report(
     Files: `fit_loops.png` (force vs elongation, measured and model, one panel per
     test), `fit_residuals.png` (model minus measured elongation vs time),
     `summary.md` (the tables of [`summary_markdown`][]) and `rmse.csv` (per test:
-    id, file, fitted and masked samples, RMSE in mm and %).
+    id, file, drive, fitted and masked samples, RMSE in mm or N and %).
 
     **Arguments:**
 
@@ -148,7 +152,7 @@ def write_report(
     """
     out.mkdir(parents=True, exist_ok=True)
     with Progress("report", 3, enabled=progress) as bar:
-        model = model_elongations(result, tests)
+        model = model_responses(result, tests)
         bar.advance(note="simulated")
         loops, resid = (out / name for name in FIT_REPORT_FILES[:2])
         plot_loops(loops, result, tests, model)
@@ -162,15 +166,29 @@ def write_report(
     table = out / FIT_REPORT_FILES[3]
     rows = io.StringIO()
     writer = csv.writer(rows, lineterminator="\n")
-    writer.writerow(["id", "file", "samples", "masked", "rmse_mm", "rmse_percent"])
+    writer.writerow(
+        [
+            "id",
+            "file",
+            "drive",
+            "samples",
+            "masked",
+            "rmse_mm",
+            "rmse_N",
+            "rmse_percent",
+        ]
+    )
     for i, test in enumerate(tests):
+        value, unit = result.rmse(i)
         writer.writerow(
             [
                 result.test_ids[i],
                 pathlib.Path(test.source).name if test.source else "",
+                result.drives[i] if result.drives else "force",
                 int(result.num_samples[i]),
                 int(np.sum(~test.mask)),
-                f"{result.rmse_mm[i]:.6g}",
+                f"{value:.6g}" if unit == "mm" else "",
+                f"{value:.6g}" if unit == "N" else "",
                 f"{result.rmse_percent[i]:.6g}",
             ]
         )

@@ -70,24 +70,31 @@ def time_axis(time: np.ndarray) -> tuple[np.ndarray, str, bool]:
     return t / scale, f"time [{unit}]", False
 
 
-def residual_axes(ax, title: str, label: str, log: bool) -> None:
-    """Label a panel of model minus measured elongation against time: the zero line,
-    the title, the time axis (`label`, log scale when `log`) and a grid."""
+def residual_axes(ax, title: str, label: str, log: bool, unit: str = "mm") -> None:
+    """Label a panel of model minus measured elongation (or force, `unit` "N")
+    against time: the zero line, the title, the time axis (`label`, log scale when
+    `log`) and a grid."""
     ax.axhline(0.0, color="0.3", lw=0.6)
     ax.set_title(title, fontsize=9)
     if log:
         ax.set_xscale("log")
     ax.set_xlabel(label)
-    ax.set_ylabel("model - measured [mm]")
+    ax.set_ylabel(f"model - measured [{unit}]")
     ax.grid(alpha=0.3)
+
+
+def _drive(result: FitResult, i: int) -> str:
+    return result.drives[i] if result.drives else "force"
 
 
 def plot_loops(
     path, result: FitResult, tests: Sequence[TestData], model: Sequence[np.ndarray]
 ) -> None:
-    """Force vs elongation, measured and model, one panel per test (PNG)."""
+    """Force vs elongation, measured and model, one panel per test (PNG). `model` is
+    each test's scored channel ([`jaxcable.model_responses`][]): the model's
+    elongation under the measured force, or its force at the measured elongation."""
     fig, axes = panels(len(tests), 3.6, 3.0, 0.6)
-    for i, (ax, test, e_model) in enumerate(zip(axes, tests, model)):
+    for i, (ax, test, response) in enumerate(zip(axes, tests, model)):
         mask = test.mask
         e = 1e3 * test.elongation
         ax.plot(e, test.force, color="0.55", lw=0.8, label="measured")
@@ -99,9 +106,13 @@ def plot_loops(
                 lw=0.8,
                 label="masked (not fitted)",
             )
-        ax.plot(1e3 * e_model, test.force, color="tab:blue", lw=1.0, label="model")
+        if _drive(result, i) == "force":
+            ax.plot(1e3 * response, test.force, color="tab:blue", lw=1.0, label="model")
+        else:
+            ax.plot(e, response, color="tab:blue", lw=1.0, label="model")
+        value, unit = result.rmse(i)
         ax.set_title(
-            f"{result.test_ids[i]}\nRMSE {result.rmse_mm[i]:.3g} mm "
+            f"{result.test_ids[i]}\nRMSE {value:.3g} {unit} "
             f"({result.rmse_percent[i]:.3g} %)",
             fontsize=9,
         )
@@ -117,11 +128,15 @@ def plot_loops(
 def plot_residuals(
     path, result: FitResult, tests: Sequence[TestData], model: Sequence[np.ndarray]
 ) -> None:
-    """Model minus measured elongation vs time, one panel per test (PNG)."""
+    """Model minus measured elongation (mm; force, N, for an elongation-driven test)
+    vs time, one panel per test (PNG)."""
     fig, axes = panels(len(tests), 3.6, 2.6, 0.6)
-    for i, (ax, test, e_model) in enumerate(zip(axes, tests, model)):
+    for i, (ax, test, response) in enumerate(zip(axes, tests, model)):
         t, label, log = time_axis(test.time)
-        r = 1e3 * (e_model - test.elongation)
+        if _drive(result, i) == "force":
+            r, unit = 1e3 * (response - test.elongation), "mm"
+        else:
+            r, unit = response - test.force, "N"
         ax.plot(t, np.where(test.mask, r, np.nan), color="tab:blue", lw=0.8)
         if not test.mask.all():
             ax.plot(
@@ -132,6 +147,6 @@ def plot_residuals(
                 label="masked (not fitted)",
             )
             ax.legend(fontsize=8)
-        residual_axes(ax, result.test_ids[i], label, log)
+        residual_axes(ax, result.test_ids[i], label, log, unit)
     fig.suptitle(f"{type(result.model).__name__}: residuals")
     save_png(fig, path)

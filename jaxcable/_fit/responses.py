@@ -1,0 +1,67 @@
+"""A model's response over a list of tests, each by its drive: one vmapped simulation
+of every sample (masked ones too), for plots, reports and held-out scores."""
+
+import dataclasses
+from collections.abc import Sequence
+
+import equinox as eqx
+import numpy as np
+
+from .._models import AbstractCableModel
+from .data import pad_tests, resolve_drives
+from .problem import residuals
+from .result import FitResult
+
+
+# Compiled once per shape: run eagerly, the vmapped scan dispatched op by op.
+_residuals = eqx.filter_jit(residuals)
+
+
+def model_responses(
+    result: FitResult | AbstractCableModel,
+    tests: Sequence,
+    drive=None,
+) -> list[np.ndarray]:
+    """The model's value of each test's scored channel at every sample: the
+    elongation (m) of a force-driven test, the force (N) of an elongation-driven one.
+
+    **Arguments:**
+
+    - `result`: a [`jaxcable.FitResult`][] of these `tests` (per-test parameters are
+        matched by position), or a model.
+    - `tests`: the tests.
+    - `drive`: as in [`jaxcable.fit`][]; default the result's drives (a model:
+        `"auto"`).
+
+    **Returns:**
+
+    One array per test; NaN throughout a test whose simulation failed.
+    """
+    if drive is None:
+        drives = getattr(result, "drives", ())
+        drive = list(drives) if drives else "auto"
+    drives = [d.control for d in resolve_drives(tests, drive)]
+    # Every sample weighted, so that the residual (model - measured) is returned at
+    # masked samples too; their measured value only needs to be finite.
+    unmasked = [
+        dataclasses.replace(
+            t,
+            mask=None,
+            elongation=np.nan_to_num(np.asarray(t.elongation, float))
+            if d == "force"
+            else t.elongation,
+            force=np.nan_to_num(np.asarray(t.force, float)),
+        )
+        for t, d in zip(tests, drives)
+    ]
+    padded = pad_tests(unmasked, drive=drives)
+    model = result.model if isinstance(result, FitResult) else result
+    params, static = eqx.partition(model, eqx.is_inexact_array)
+    r = (
+        np.asarray(_residuals(params, static, padded))
+        * np.asarray(padded.scale)[:, None]
+    )
+    return [
+        r[i, : t.num_samples] + (t.elongation if d == "force" else t.force)
+        for i, (t, d) in enumerate(zip(unmasked, drives))
+    ]
