@@ -70,15 +70,16 @@ def time_axis(time: np.ndarray) -> tuple[np.ndarray, str, bool]:
     return t / scale, f"time [{unit}]", False
 
 
-def residual_axes(ax, title: str, label: str, log: bool) -> None:
-    """Label a panel of model minus measured elongation against time: the zero line,
-    the title, the time axis (`label`, log scale when `log`) and a grid."""
+def residual_axes(ax, title: str, label: str, log: bool, unit: str = "mm") -> None:
+    """Label a panel of model minus measured value against time: the zero line,
+    the title, the time axis (`label`, log scale when `log`), a grid, and the
+    residual's `unit` (mm of elongation, N of force, or noise units)."""
     ax.axhline(0.0, color="0.3", lw=0.6)
     ax.set_title(title, fontsize=9)
     if log:
         ax.set_xscale("log")
     ax.set_xlabel(label)
-    ax.set_ylabel("model - measured [mm]")
+    ax.set_ylabel(f"model - measured [{unit}]")
     ax.grid(alpha=0.3)
 
 
