@@ -13,7 +13,7 @@ from .._progress import Progress
 from .._report import DIAGNOSIS_REPORT_FILES, write_diagnosis_report
 from .common import CliError, make_folder, require_folder_of, show_progress
 from .data import data_options, describe_tests, read_tests
-from .fit import input_files, named_files, report_files
+from .fit import input_files, named_files, report_files, test_drives
 from .models import resolve_model
 from .outputs import refuse_inputs, say_replacing, write_errors
 
@@ -64,8 +64,11 @@ def diagnose_command(args) -> int:
         outputs = report_files(args.report, DIAGNOSIS_REPORT_FILES)
         refuse_inputs(outputs, input_files(args))
     tests = read_tests(args.data, data_options(args), args.every, progress)
+    # Resolved (and printed) once here: the diagnosis then fits every fold and
+    # candidate with these drives.
+    drives = test_drives(tests, args.drive)
     print(f"read {len(tests)} file(s):", file=log)
-    print("\n".join(describe_tests(tests, args.every)), file=log)
+    print("\n".join(describe_tests(tests, args.every, drives)), file=log)
     diagnosis = run_diagnosis(
         model,
         name,
@@ -80,6 +83,7 @@ def diagnose_command(args) -> int:
         multistart=args.starts,
         max_steps=args.max_steps,
         key=jax.random.key(args.seed),
+        drive=[d.control for d in drives],
     )
     if args.json:
         print(diagnosis.to_json())

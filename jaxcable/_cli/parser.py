@@ -325,8 +325,10 @@ def build_parser() -> argparse.ArgumentParser:
     diag.add_argument(
         "--json",
         action="store_true",
-        help="print one JSON object on stdout (named_cause, candidates, "
-        "base_heldout_rmse_mm, extended_heldout_rmse_mm, ...); the log goes to stderr",
+        help="print one JSON object on stdout (named_cause, candidates, unit, "
+        "base_heldout_rmse, extended_heldout_rmse, ... in unit: mm, N or noise; "
+        "the *_mm fields in mm when every test is force-driven); the log goes to "
+        "stderr",
     )
     diag.add_argument(
         "--report",
@@ -370,6 +372,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="held-out fraction of every test's samples for --split time "
         "(default: 0.3)",
     )
+    _add_drive_option(diag, "of each test (fixed for every fold and candidate)")
     _add_solver_options(diag, starts=1)
     diag.set_defaults(run=diagnose_command)
 

@@ -13,8 +13,7 @@ from .._drive import (
     simulate_force_history,
     simulate_rate_test,
 )
-from .._io import TestData, read_protocol, resolve_control, write_csv
-from .._io.csv import read_canonical
+from .._io import TestData, read_canonical, read_protocol, resolve_control, write_csv
 from .._results import RESULTS
 from .common import CliError, require_folder_of
 from .data import read_located

@@ -1,5 +1,9 @@
 from .diagnose import diagnose as diagnose
-from .elongations import model_elongations as model_elongations
+from .elongations import (
+    model_elongations as model_elongations,
+    model_outputs as model_outputs,
+    scored_residuals as scored_residuals,
+)
 from .heldout import (
     heldout_rmse as heldout_rmse,
     heldout_start as heldout_start,
@@ -13,4 +17,5 @@ from .result import (
     Candidate as Candidate,
     Diagnosis as Diagnosis,
 )
+from .scoring import Scoring as Scoring, noise_floor as noise_floor, scoring as scoring
 from .structure import residual_structure as residual_structure

@@ -28,8 +28,7 @@ import numpy as np
 
 from .._fit import FitResult, IdentifiabilityWarning, as_test_list, fit, test_id
 from .._models import EXTENSIONS, AbstractCableModel, IntegratedModel, identifiable
-from .elongations import model_elongations
-from .heldout import noise_level, splits, with_mask
+from .heldout import Fold, splits, with_mask
 from .result import (
     MAX_DELTA_BIC,
     MIN_EXCESS,
@@ -38,22 +37,25 @@ from .result import (
     Candidate,
     Diagnosis,
 )
+from .scoring import Scoring, noise_floor, scoring
 from .structure import residual_structure
 
 
 class _Score(NamedTuple):
     """One model scored over every fold: RMSE on the held-out and on the training
-    samples (mm), the number of training samples, and the fit of every fold."""
+    samples (in the diagnosis's reported unit), the number of training samples, and
+    the fit of every fold."""
 
-    heldout_rmse_mm: float
-    train_rmse_mm: float
+    heldout_rmse: float
+    train_rmse: float
     num_train: int
     fits: list[FitResult]
 
 
-def _bic(rmse_mm: float, n: int, p: int) -> float:
-    """The Bayesian information criterion n ln(SSR / n) + p ln n."""
-    return n * math.log(max((rmse_mm * 1e-3) ** 2, 1e-300)) + p * math.log(n)
+def _bic(rmse: float, n: int, p: int, per_unit: float) -> float:
+    """The Bayesian information criterion n ln(SSR / n) + p ln n, SSR in residual
+    units (`rmse` / `per_unit`: per_unit is 1e3 for an RMSE in mm of residuals in m)."""
+    return n * math.log(max((rmse * (1.0 / per_unit)) ** 2, 1e-300)) + p * math.log(n)
 
 
 def _applicability(ext_id: str, tests) -> str:
@@ -73,10 +75,11 @@ def _applicability(ext_id: str, tests) -> str:
 
 
 def _score(
-    parts: list[tuple[list, list]],
+    parts: list[Fold],
     start_models: Callable[[int], list[AbstractCableModel]],
     names: tuple[str, ...] | None,
     *,
+    how: Scoring,
     same_tests: bool,
     multistart: int,
     max_steps: int,
@@ -88,11 +91,13 @@ def _score(
     `start_models(k)` gives fold k's start models: the first is fitted; when its
     training SSR is above the base model's on that fold (`base_losses`), the second is
     fitted too and the better kept, so that a candidate never fits its training data
-    worse than the base it contains. `same_tests`: the held-out tests are the training
-    tests with other masks (the time split), so one simulation serves both.
+    worse than the base it contains. Every fit and simulation uses the drives of
+    `how`, fixed on the whole tests; the scores are in its units. `same_tests`: the
+    held-out tests are the training tests with other masks (the time split), so one
+    simulation serves both.
     """
 
-    def run_fit(m, train):
+    def run_fit(m, train, index):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", IdentifiabilityWarning)
             return fit(
@@ -103,35 +108,37 @@ def _score(
                 max_steps=max_steps,
                 key=key,
                 throw=False,
-                drive="force",
+                drive=[how.drives[i] for i in index],
             )
 
     sq_held = n_held = sq_train = n_train = 0.0
     results = []
-    for k, (train, held) in enumerate(parts):
+    for k, fold in enumerate(parts):
         first, *others = start_models(k)
-        result = run_fit(first, train)
+        result = run_fit(first, fold.train, fold.train_index)
         if base_losses is not None and others and not (result.loss <= base_losses[k]):
-            other = run_fit(others[0], train)
+            other = run_fit(others[0], fold.train, fold.train_index)
             if not (result.loss <= other.loss):
                 result = other
         results.append(result)
         if not math.isfinite(result.loss):
             return _Score(math.inf, math.inf, 1, results)
-        e_train = model_elongations(result, train)
+        r_train = how.residuals(result, fold.train, fold.train_index)
         # Shared parameters only, so the fitted model runs on any test.
-        e_held = e_train if same_tests else model_elongations(result, held)
-        for t, e in zip(train, e_train):
+        r_held = (
+            r_train if same_tests else how.residuals(result, fold.held, fold.held_index)
+        )
+        for t, r in zip(fold.train, r_train):
             m = np.asarray(t.mask, bool)
-            sq_train += float(np.sum((e - t.elongation)[m] ** 2))
+            sq_train += float(np.sum(r[m] ** 2))
             n_train += int(m.sum())
-        for t, e in zip(held, e_held):
+        for t, r in zip(fold.held, r_held):
             m = np.asarray(t.mask, bool)
-            sq_held += float(np.sum((e - t.elongation)[m] ** 2))
+            sq_held += float(np.sum(r[m] ** 2))
             n_held += int(m.sum())
     return _Score(
-        1e3 * math.sqrt(sq_held / max(n_held, 1)),
-        1e3 * math.sqrt(sq_train / max(n_train, 1)),
+        how.factor * math.sqrt(sq_held / max(n_held, 1)),
+        how.factor * math.sqrt(sq_train / max(n_train, 1)),
         int(n_train),
         results,
     )
@@ -178,6 +185,7 @@ def diagnose(
     max_steps: int = 256,
     key=None,
     progress=None,
+    drive="auto",
 ) -> Diagnosis:
     """Find what a model gets wrong on measured data and name the physical cause.
 
@@ -188,7 +196,18 @@ def diagnose(
     `MIN_SIZE_Z` = 3 standard errors from zero. The named cause is the significant
     candidate of largest held-out gain, else `"none"`; and `"none"` whenever the base
     model's held-out RMSE is within `MIN_EXCESS` = 1.2 times the noise level estimated
-    from the data ([`noise_level`][]): there is nothing left to explain.
+    from the data: there is nothing left to explain.
+
+    **Drives.** As in [`jaxcable.fit`][], a force-controlled test is driven by its
+    force and scored on its elongation, a displacement-controlled one (relaxation, a
+    constant crosshead rate) driven by its elongation and scored on its force. Each
+    test's drive is resolved once, on the whole tests (`drive`), and every fit and
+    simulation of every fold uses it. The RMSEs, the noise level, BIC and the residual
+    structure are all in the scored channels: mm when every test is driven by its
+    force, N when every test is driven by its elongation, and, when the drives mix,
+    noise units: each test's residual divided by the noise standard deviation of its
+    scored channel (estimated once on the whole test, as a mixed fit weighs it), so
+    that held-out scores are comparable across channels (`Diagnosis.unit`).
 
     **Arguments:**
 
@@ -209,6 +228,8 @@ def diagnose(
     - `max_steps`: Levenberg-Marquardt steps per fit.
     - `key`: PRNG key of the multistart perturbations.
     - `progress`: an optional callable `progress(message: str)` told of each fit.
+    - `drive`: `"auto"` (default: each test's `metadata['control']`, else detected
+        from its data), `"force"`, `"elongation"`, or one of these per test.
 
     **Returns:**
 
@@ -217,7 +238,7 @@ def diagnose(
     **Raises:**
 
     `ValueError` naming the argument: an unknown candidate id, a bad `split` or
-    `holdout`, too few tests for leave-one-test-out; and the errors of
+    `holdout`, too few tests for leave-one-test-out, a bad `drive`; and the errors of
     [`jaxcable.fit`][] for bad data.
     """
     tests = as_test_list(tests)
@@ -234,23 +255,28 @@ def diagnose(
     ]
     names = tuple(fit_names) if fit_names is not None else identifiable(model)
     say = progress or (lambda message: None)
+    # The drives and residual units, once for the whole tests: no fold re-detects.
+    how = scoring(tests, drive)
     parts = splits(tests, split, holdout, k)
-    settings = dict(same_tests=split == "time", max_steps=max_steps, key=key)
+    settings = dict(how=how, same_tests=split == "time", max_steps=max_steps, key=key)
 
     say(f"fitting the base model {type(model).__name__}")
     base = _score(parts, lambda k: [model], names, multistart=multistart, **settings)
     base_fit = base.fits[0]
     base_losses = [r.loss for r in base.fits]
-    if not math.isfinite(base.heldout_rmse_mm):
+    if not math.isfinite(base.heldout_rmse):
         raise RuntimeError(
             f"jaxcable.diagnose: the base model's fit failed ({base_fit.message})."
         )
-    bic_base = _bic(base.train_rmse_mm, base.num_train, len(base_fit.names))
+    bic_base = _bic(base.train_rmse, base.num_train, len(base_fit.names), how.factor)
 
-    # The base's residuals over whole tests, for the structure analysis.
-    whole = model_elongations(base_fit, tests)
+    # The base's residuals over whole tests in their scored channels, for the
+    # structure analysis.
     structure = residual_structure(
-        tests, [e - t.elongation for t, e in zip(tests, whole)]
+        tests,
+        how.residuals(base_fit, tests, range(len(tests))),
+        drives=how.drives,
+        unit=how.unit,
     )
 
     out = []
@@ -267,7 +293,7 @@ def diagnose(
             except ValueError as e:
                 reason = str(e)
         if reason:
-            out.append(Candidate.not_applicable(ext_id, cls, reason))
+            out.append(Candidate.not_applicable(ext_id, cls, reason, how.unit))
             continue
         say(f"fitting candidate {ext_id}")
         # The candidates refit the base's fitted parameters (all of them when `names`
@@ -285,10 +311,11 @@ def diagnose(
         size_index = result.names.index(cls.SIZE_FIELD)
         size = float(result.values[size_index])
         stderr = float(result.stderr[size_index])
-        held = scored.heldout_rmse_mm
-        gain = 100.0 * (base.heldout_rmse_mm - held) / base.heldout_rmse_mm
+        held = scored.heldout_rmse
+        gain = 100.0 * (base.heldout_rmse - held) / base.heldout_rmse
         delta_bic = (
-            _bic(scored.train_rmse_mm, scored.num_train, len(result.names)) - bic_base
+            _bic(scored.train_rmse, scored.num_train, len(result.names), how.factor)
+            - bic_base
         )
         z = abs(size) / stderr if stderr > 0 else (math.inf if size != 0 else 0.0)
         significant = bool(
@@ -302,7 +329,7 @@ def diagnose(
                 ext_id,
                 held,
                 gain,
-                scored.train_rmse_mm,
+                scored.train_rmse,
                 delta_bic,
                 size,
                 stderr,
@@ -312,14 +339,15 @@ def diagnose(
                 True,
                 "",
                 result,
+                how.unit,
             )
         )
 
-    noise_mm = 1e3 * noise_level(tests)
+    noise = noise_floor(tests, how)
     winners = [c for c in out if c.significant]
-    if winners and base.heldout_rmse_mm > MIN_EXCESS * noise_mm:
+    if winners and base.heldout_rmse > MIN_EXCESS * noise:
         best = max(winners, key=lambda c: c.gain_pct)
-        named, extended, gain = best.id, best.heldout_rmse_mm, best.gain_pct
+        named, extended, gain = best.id, best.heldout_rmse, best.gain_pct
         effect = {
             "parameter": best.size_name,
             "value": best.size,
@@ -327,18 +355,18 @@ def diagnose(
             "unit": best.size_unit,
         }
     else:
-        named, extended, gain, effect = "none", base.heldout_rmse_mm, 0.0, {}
+        named, extended, gain, effect = "none", base.heldout_rmse, 0.0, {}
     return Diagnosis(
         base_model=type(model).__name__,
         named_cause=named,
-        base_heldout_rmse_mm=base.heldout_rmse_mm,
-        base_train_rmse_mm=base.train_rmse_mm,
-        extended_heldout_rmse_mm=extended,
+        base_heldout_rmse=base.heldout_rmse,
+        base_train_rmse=base.train_rmse,
+        extended_heldout_rmse=extended,
         gain_pct=gain,
         effect=effect,
         candidates=tuple(out),
         structure=structure,
-        noise_mm=noise_mm,
+        noise=noise,
         split=(
             f"last {holdout:.0%} of every test's samples"
             if split == "time"
@@ -349,4 +377,7 @@ def diagnose(
         holdout=holdout if split == "time" else None,
         test_ids=tuple(test_id(t, i) for i, t in enumerate(tests)),
         base_fit=base_fit,
+        unit=how.unit,
+        drives=how.drives,
+        scales=tuple(float(x) for x in how.scales),
     )

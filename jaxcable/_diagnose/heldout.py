@@ -4,14 +4,14 @@ level estimated from the data."""
 
 import dataclasses
 import math
-from typing import Literal
+from typing import Literal, NamedTuple
 
 import numpy as np
 
 from .._fit import as_test_list
 from .._io import TestData
 from .._models import AbstractCableModel
-from .elongations import model_elongations
+from .scoring import scoring
 
 
 def with_mask(test: TestData, mask: np.ndarray) -> TestData:
@@ -40,10 +40,20 @@ def time_split(tests, holdout: float) -> tuple[list, list]:
     return train, held
 
 
+class Fold(NamedTuple):
+    """One fold of a diagnosis: the training tests and the held-out tests (masked
+    copies of the diagnosis's tests), and their positions among them."""
+
+    train: list
+    held: list
+    train_index: list[int]
+    held_index: list[int]
+
+
 def splits(
     tests, split: Literal["time", "tests"], holdout: float, folds: int
-) -> list[tuple[list, list]]:
-    """The (training tests, held-out tests) of every fold.
+) -> list[Fold]:
+    """The training and held-out tests of every fold.
 
     **Arguments:**
 
@@ -55,17 +65,19 @@ def splits(
 
     **Returns:**
 
-    One (training, held-out) pair of test lists per fold.
+    One [`Fold`][] per fold.
     """
     if split == "time":
-        return [time_split(tests, holdout)]
-    return [
-        (
-            [t for i, t in enumerate(tests) if i % folds != fold],
-            [t for i, t in enumerate(tests) if i % folds == fold],
+        every = list(range(len(tests)))
+        return [Fold(*time_split(tests, holdout), every, every)]
+    out = []
+    for fold in range(folds):
+        train = [i for i in range(len(tests)) if i % folds != fold]
+        held = [i for i in range(len(tests)) if i % folds == fold]
+        out.append(
+            Fold([tests[i] for i in train], [tests[i] for i in held], train, held)
         )
-        for fold in range(folds)
-    ]
+    return out
 
 
 def heldout_rmse(
@@ -73,9 +85,10 @@ def heldout_rmse(
     tests,
     *,
     holdout: float = 0.3,
+    drive="auto",
 ) -> float:
     """The RMSE of a given model on the held-out samples of `diagnose`'s time split
-    (the last `holdout` fraction of every test), mm.
+    (the last `holdout` fraction of every test), in the unit `diagnose` reports.
 
     For the data-generating model of synthetic data this is the floor no fitted model
     can beat: the elongation noise plus the response to the force noise the model is
@@ -86,17 +99,21 @@ def heldout_rmse(
     - `model`: the model, with its parameters.
     - `tests`: the tests ([`jaxcable.TestData`][]).
     - `holdout`: the held-out fraction of every test.
+    - `drive`: each test's drive, as in [`jaxcable.diagnose`][] (default `"auto"`).
 
     **Returns:**
 
-    The pooled RMSE over all held-out samples, mm.
+    The pooled RMSE over all held-out samples: mm when every test is driven by its
+    force (its elongation scored), N when every test is driven by its elongation,
+    noise units (each residual / its scored channel's noise) when the drives mix.
     """
     tests = as_test_list(tests)
+    how = scoring(tests, drive)
     _, held = time_split(tests, holdout)
-    e = model_elongations(model, held)
-    sq = sum(float(np.sum((x - t.elongation)[t.mask] ** 2)) for t, x in zip(held, e))
+    r = how.residuals(model, held, range(len(held)))
+    sq = sum(float(np.sum(x[t.mask] ** 2)) for t, x in zip(held, r))
     n = sum(int(np.sum(t.mask)) for t in held)
-    return 1e3 * math.sqrt(sq / n)
+    return how.factor * math.sqrt(sq / n)
 
 
 def noise_level(tests) -> float:

@@ -31,9 +31,9 @@ class Candidate:
     **Fields:**
 
     - `id`: the extension's id (a key of [`jaxcable.EXTENSIONS`][]).
-    - `heldout_rmse_mm`: RMSE on the held-out samples, mm.
+    - `heldout_rmse`: RMSE on the held-out samples, in `unit`.
     - `gain_pct`: 100 (base - candidate) / base held-out RMSE, %.
-    - `train_rmse_mm`: RMSE on the training samples, mm.
+    - `train_rmse`: RMSE on the training samples, in `unit`.
     - `delta_bic`: BIC(candidate) - BIC(base) on the training samples (< 0 favours
         the candidate; -10 is "very strong" evidence).
     - `size`, `size_stderr`, `size_unit`, `size_name`: the effect's size parameter
@@ -43,12 +43,17 @@ class Candidate:
     - `applicable`: False when the data cannot show this effect at all (e.g.
         `temperature` on tests that all ran at one temperature); `note` says why.
     - `fit`: the [`jaxcable.FitResult`][] (None when not applicable).
+    - `unit`: the unit of the RMSEs: `"mm"` (every test scored in its elongation),
+        `"N"` (every test in its force) or `"noise"` (mixed drives: each residual
+        divided by the noise of its test's scored channel).
+    - `heldout_rmse_mm`, `train_rmse_mm` (properties): the RMSEs in mm; NaN unless
+        `unit` is mm.
     """
 
     id: str
-    heldout_rmse_mm: float
+    heldout_rmse: float
     gain_pct: float
-    train_rmse_mm: float
+    train_rmse: float
     delta_bic: float
     size: float
     size_stderr: float
@@ -58,9 +63,22 @@ class Candidate:
     applicable: bool = True
     note: str = ""
     fit: FitResult | None = dataclasses.field(default=None, repr=False, compare=False)
+    unit: str = "mm"
+
+    @property
+    def heldout_rmse_mm(self) -> float:
+        """The held-out RMSE, mm (NaN unless every test is scored in elongation)."""
+        return _in_mm(self.heldout_rmse, self.unit)
+
+    @property
+    def train_rmse_mm(self) -> float:
+        """The training RMSE, mm (NaN unless every test is scored in elongation)."""
+        return _in_mm(self.train_rmse, self.unit)
 
     @classmethod
-    def not_applicable(cls, id: str, extension: type, note: str) -> "Candidate":
+    def not_applicable(
+        cls, id: str, extension: type, note: str, unit: str = "mm"
+    ) -> "Candidate":
         """A candidate the data cannot show (`note` says why): no fit, no scores."""
         nan = math.nan
         return cls(
@@ -76,12 +94,16 @@ class Candidate:
             significant=False,
             applicable=False,
             note=note,
+            unit=unit,
         )
 
     def to_dict(self) -> dict[str, Any]:
-        """A JSON-ready dict of the scores (the fit left out; NaN as None)."""
+        """A JSON-ready dict of the scores (the fit left out; NaN as None), with the
+        RMSEs in `unit` and, as before, in mm (None unless `unit` is mm)."""
         out = dataclasses.asdict(self)
         out.pop("fit")
+        out["heldout_rmse_mm"] = self.heldout_rmse_mm
+        out["train_rmse_mm"] = self.train_rmse_mm
         return {k: _jsonable(v) for k, v in out.items()}
 
 
@@ -93,9 +115,9 @@ class Diagnosis:
 
     - `base_model`: the base model's class name.
     - `named_cause`: the id of the named extension, or `"none"`.
-    - `base_heldout_rmse_mm`, `base_train_rmse_mm`: the base model's RMSE, mm.
-    - `extended_heldout_rmse_mm`: the held-out RMSE of the named extension (the
-        base's when `"none"`), mm.
+    - `base_heldout_rmse`, `base_train_rmse`: the base model's RMSE, in `unit`.
+    - `extended_heldout_rmse`: the held-out RMSE of the named extension (the base's
+        when `"none"`), in `unit`.
     - `gain_pct`: its held-out gain, % (0 for `"none"`).
     - `effect`: the named effect's size: `{"parameter", "value", "stderr", "unit"}`
         (empty for `"none"`).
@@ -103,29 +125,61 @@ class Diagnosis:
         [`jaxcable.EXTENSIONS`][].
     - `structure`: the base residuals' structure: `{feature: correlation}` and the
         lag-1 autocorrelation with its white-noise band (`residual_structure`).
-    - `noise_mm`: the elongation noise estimated from the data (robust, from second
-        differences), mm.
+    - `noise`: the noise of the scored channels estimated from the data (robust,
+        from second differences), in `unit`.
     - `split`: how held-out data were chosen.
     - `holdout`: the held-out fraction of every test for the time split, None for
         cross-validation by tests.
     - `test_ids`: the tests.
     - `base_fit`: the base model's [`jaxcable.FitResult`][] on the training data.
+    - `unit`: the unit of every RMSE and of the noise: `"mm"` (every test driven by
+        its force, its elongation scored), `"N"` (every test driven by its
+        elongation, its force scored) or `"noise"` (both kinds: each residual
+        divided by the noise standard deviation of its test's scored channel).
+    - `drives`: each test's drive, `"force"` or `"elongation"`.
+    - `scales`: each test's residual unit (1, or in noise units the noise standard
+        deviation of its scored channel, m or N).
+    - `base_heldout_rmse_mm`, `base_train_rmse_mm`, `extended_heldout_rmse_mm`,
+        `noise_mm` (properties): the same in mm; NaN unless `unit` is mm.
     """
 
     base_model: str
     named_cause: str
-    base_heldout_rmse_mm: float
-    base_train_rmse_mm: float
-    extended_heldout_rmse_mm: float
+    base_heldout_rmse: float
+    base_train_rmse: float
+    extended_heldout_rmse: float
     gain_pct: float
     effect: dict[str, Any]
     candidates: tuple[Candidate, ...]
     structure: dict[str, Any]
-    noise_mm: float
+    noise: float
     split: str
     holdout: float | None
     test_ids: tuple[str, ...]
     base_fit: FitResult = dataclasses.field(repr=False, compare=False)
+    unit: str = "mm"
+    drives: tuple[str, ...] = ()
+    scales: tuple[float, ...] = ()
+
+    @property
+    def base_heldout_rmse_mm(self) -> float:
+        """The base model's held-out RMSE, mm (NaN unless `unit` is mm)."""
+        return _in_mm(self.base_heldout_rmse, self.unit)
+
+    @property
+    def base_train_rmse_mm(self) -> float:
+        """The base model's training RMSE, mm (NaN unless `unit` is mm)."""
+        return _in_mm(self.base_train_rmse, self.unit)
+
+    @property
+    def extended_heldout_rmse_mm(self) -> float:
+        """The named extension's held-out RMSE, mm (NaN unless `unit` is mm)."""
+        return _in_mm(self.extended_heldout_rmse, self.unit)
+
+    @property
+    def noise_mm(self) -> float:
+        """The elongation noise, mm (NaN unless `unit` is mm)."""
+        return _in_mm(self.noise, self.unit)
 
     def candidate(self, id: str) -> Candidate:
         """The candidate of this id."""
@@ -135,7 +189,8 @@ class Diagnosis:
         raise ValueError(f"`id` {id!r} is not a candidate here.")
 
     def to_dict(self) -> dict[str, Any]:
-        """A JSON-ready dict (the `--json` output of `jaxcable diagnose`)."""
+        """A JSON-ready dict (the `--json` output of `jaxcable diagnose`): the RMSEs
+        and the noise in `unit`, and, as before, in mm (None unless `unit` is mm)."""
         return {
             "named_cause": self.named_cause,
             "base_model": self.base_model,
@@ -145,6 +200,12 @@ class Diagnosis:
             "gain_pct": _jsonable(self.gain_pct),
             "effect": {k: _jsonable(v) for k, v in self.effect.items()},
             "noise_mm": _jsonable(self.noise_mm),
+            "unit": self.unit,
+            "base_heldout_rmse": _jsonable(self.base_heldout_rmse),
+            "base_train_rmse": _jsonable(self.base_train_rmse),
+            "extended_heldout_rmse": _jsonable(self.extended_heldout_rmse),
+            "noise": _jsonable(self.noise),
+            "drives": list(self.drives),
             "split": self.split,
             "thresholds": {
                 "min_gain_pct": MIN_GAIN_PCT,
@@ -166,34 +227,46 @@ class Diagnosis:
 
     def summary(self) -> str:
         """A plain-text table: base, every candidate, the named cause."""
+        u = self.unit
+        w = max(12, len(u) + 10)  # the held-out column: 12 wide in mm, as ever
         lines = [
             f"jaxcable diagnose: base {self.base_model}, {len(self.test_ids)} test(s), "
             f"held out: {self.split}",
-            f"noise (estimated from the data) {self.noise_mm * 1e3:.3g} um; base "
-            f"RMSE {self.base_train_rmse_mm:.4g} mm fitted, "
-            f"{self.base_heldout_rmse_mm:.4g} mm held out",
+        ]
+        if u != "mm":
+            lines.append(_scored_line(self.drives, u))
+        noise = f"{self.noise * 1e3:.3g} um" if u == "mm" else f"{self.noise:.3g} {u}"
+        lines += [
+            f"noise (estimated from the data) {noise}; base "
+            f"RMSE {self.base_train_rmse:.4g} {u} fitted, "
+            f"{self.base_heldout_rmse:.4g} {u} held out",
             "",
-            f"{'candidate':<24}{'held-out mm':>12}{'gain %':>9}{'dBIC':>10}"
+            f"{'candidate':<24}{'held-out ' + u:>{w}}{'gain %':>9}{'dBIC':>10}"
             f"{'size':>12}{'+-':>10}  unit",
         ]
         for c in self.candidates:
             if not c.applicable:
-                lines.append(f"{c.id:<24}{'n/a':>12}  {c.note}")
+                lines.append(f"{c.id:<24}{'n/a':>{w}}  {c.note}")
                 continue
             mark = " *" if c.significant else ""
             lines.append(
-                f"{c.id:<24}{c.heldout_rmse_mm:>12.4g}{c.gain_pct:>9.1f}"
+                f"{c.id:<24}{c.heldout_rmse:>{w}.4g}{c.gain_pct:>9.1f}"
                 f"{c.delta_bic:>10.1f}{c.size:>12.4g}{c.size_stderr:>10.2g}  "
                 f"{c.size_unit}{mark}"
             )
         lines.append("")
         if self.named_cause == "none" and (
-            self.base_heldout_rmse_mm <= MIN_EXCESS * self.noise_mm
+            self.base_heldout_rmse <= MIN_EXCESS * self.noise
         ):
+            against = (
+                f"{self.base_heldout_rmse * 1e3:.3g} um against "
+                f"{self.noise * 1e3:.3g} um"
+                if u == "mm"
+                else f"{self.base_heldout_rmse:.3g} {u} against {self.noise:.3g} {u}"
+            )
             lines.append(
                 f"named cause: none (the base predicts the held-out data to within "
-                f"{MIN_EXCESS:g} x the noise: {self.base_heldout_rmse_mm * 1e3:.3g} "
-                f"um against {self.noise_mm * 1e3:.3g} um)"
+                f"{MIN_EXCESS:g} x the noise: {against})"
             )
         elif self.named_cause == "none":
             lines.append(
@@ -206,8 +279,8 @@ class Diagnosis:
             lines.append(
                 f"named cause: {self.named_cause}: {e['parameter']} = "
                 f"{e['value']:.4g} +- {e['stderr']:.2g} {e['unit']}; held-out RMSE "
-                f"{self.base_heldout_rmse_mm:.4g} -> "
-                f"{self.extended_heldout_rmse_mm:.4g} mm ({self.gain_pct:.1f} % gain)"
+                f"{self.base_heldout_rmse:.4g} -> "
+                f"{self.extended_heldout_rmse:.4g} {u} ({self.gain_pct:.1f} % gain)"
             )
         strongest = self.structure.get("strongest")
         if strongest:
@@ -218,6 +291,23 @@ class Diagnosis:
                 f"noise: |r| < {self.structure['white_noise_band']:.2g})"
             )
         return "\n".join(lines)
+
+
+def _scored_line(drives: tuple[str, ...], unit: str) -> str:
+    """What a diagnosis not in mm scores: one line for the summary."""
+    if unit == "N":
+        return "scored: the force, N (every test driven by its elongation)"
+    by_force = sum(d == "force" for d in drives)
+    return (
+        f"scored: {by_force} force-driven test(s) by their elongation, "
+        f"{len(drives) - by_force} elongation-driven by their force; residuals in "
+        "noise units (each divided by the noise of its test's scored channel)"
+    )
+
+
+def _in_mm(value: float, unit: str) -> float:
+    """`value` (in `unit`) in mm; NaN when `unit` is not mm."""
+    return value if unit == "mm" else math.nan
 
 
 def _jsonable(x):

@@ -13,6 +13,11 @@ from .controller import (
     controller_init as controller_init,
     controller_step as controller_step,
 )
+from .drives import (
+    ElongationDrive as ElongationDrive,
+    ElongationSample as ElongationSample,
+    default_solver as default_solver,
+)
 from .newton import Newton as Newton
 from .protocol import (
     Protocol as Protocol,

@@ -13,8 +13,14 @@ from jaxtyping import Array, Bool, Float, PyTree
 
 from .. import _checks
 from .._cable import Cable
-from .._drive import CableState, init_state, step
-from .._drive.drives import ElongationDrive, ElongationSample, default_solver
+from .._drive import (
+    CableState,
+    ElongationDrive,
+    ElongationSample,
+    default_solver,
+    init_state,
+    step,
+)
 from .._models import AbstractCableModel, ParameterInfo
 from .._results import RESULTS
 from .data import PaddedTests, as_test_list, pad_tests, test_id

@@ -4,7 +4,11 @@ from .control import (
     detect_control as detect_control,
     resolve_control as resolve_control,
 )
-from .csv import read_csv as read_csv, write_csv as write_csv
+from .csv import (
+    read_canonical as read_canonical,
+    read_csv as read_csv,
+    write_csv as write_csv,
+)
 from .json_file import parse_json as parse_json, read_json as read_json
 from .preamble import MetadataConflictWarning as MetadataConflictWarning
 from .protocol_file import ProtocolFile as ProtocolFile, read_protocol as read_protocol

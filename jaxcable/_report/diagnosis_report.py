@@ -8,7 +8,7 @@ import pathlib
 
 import numpy as np
 
-from .._diagnose import MIN_GAIN_PCT, Diagnosis, heldout_start, model_elongations
+from .._diagnose import MIN_GAIN_PCT, Diagnosis, heldout_start, scored_residuals
 from .._files import write_text_atomic
 from .._fit import as_test_list
 from .plots import panels, residual_axes, save_png, time_axis
@@ -25,24 +25,34 @@ DIAGNOSIS_REPORT_FILES = (
 )
 
 
+def _residuals(result, diagnosis: Diagnosis, tests: list) -> list[np.ndarray]:
+    """Model minus measured value of every test's scored channel, in the diagnosis's
+    unit (mm of elongation, N of force, or noise units)."""
+    drives = diagnosis.drives or ("force",) * len(tests)
+    scales = diagnosis.scales or (1.0,) * len(tests)
+    factor = 1e3 if diagnosis.unit == "mm" else 1.0
+    return [factor * r for r in scored_residuals(result, tests, drives, scales)]
+
+
 def _plot_residuals(path, diagnosis: Diagnosis, tests: list) -> None:
-    """Model minus measured elongation vs time, base and the named extension, one
-    panel per test, the held-out part shaded (PNG)."""
-    base = model_elongations(diagnosis.base_fit, tests)
+    """Model minus measured value of each test's scored channel (elongation or force)
+    vs time, base and the named extension, one panel per test, the held-out part
+    shaded (PNG)."""
+    base = _residuals(diagnosis.base_fit, diagnosis, tests)
     named = (
         diagnosis.candidate(diagnosis.named_cause)
         if diagnosis.named_cause != "none"
         else None
     )
-    extended = model_elongations(named.fit, tests) if named is not None else None
+    extended = _residuals(named.fit, diagnosis, tests) if named is not None else None
     fig, axes = panels(len(tests), 3.8, 2.7, 0.8)
     for i, (ax, t) in enumerate(zip(axes, tests)):
         x, label, log = time_axis(np.asarray(t.time, float))
-        ax.plot(x, 1e3 * (base[i] - t.elongation), color="0.5", lw=0.8, label="base")
+        ax.plot(x, base[i], color="0.5", lw=0.8, label="base")
         if extended is not None:
             ax.plot(
                 x,
-                1e3 * (extended[i] - t.elongation),
+                extended[i],
                 color="tab:blue",
                 lw=0.8,
                 label=f"+ {diagnosis.named_cause}",
@@ -51,7 +61,7 @@ def _plot_residuals(path, diagnosis: Diagnosis, tests: list) -> None:
             cut = heldout_start(len(t.time), diagnosis.holdout)
             if cut < len(t.time):
                 ax.axvspan(x[cut], x[-1], color="tab:orange", alpha=0.12, lw=0)
-        residual_axes(ax, diagnosis.test_ids[i], label, log)
+        residual_axes(ax, diagnosis.test_ids[i], label, log, diagnosis.unit)
         if i == 0:
             ax.legend(fontsize=8)
     fig.suptitle(
@@ -74,7 +84,8 @@ def _plot_candidates(path, diagnosis: Diagnosis) -> None:
     ax.axvline(MIN_GAIN_PCT, color="tab:red", lw=0.8, ls="--", label="threshold")
     ax.set_xlabel("held-out RMSE gain over the base [%]")
     ax.set_title(
-        f"base held-out RMSE {diagnosis.base_heldout_rmse_mm:.3g} mm; named: "
+        f"base held-out RMSE {diagnosis.base_heldout_rmse:.3g} {diagnosis.unit}; "
+        "named: "
         f"{diagnosis.named_cause}",
         fontsize=10,
     )
@@ -110,7 +121,8 @@ def _plot_structure(path, diagnosis: Diagnosis) -> None:
 def _candidate_table(diagnosis: Diagnosis) -> list[str]:
     """Every candidate's scores as the lines of a markdown table."""
     table = [
-        "| candidate | held-out RMSE mm | gain % | ΔBIC | size | ± | unit | significant |",
+        f"| candidate | held-out RMSE {diagnosis.unit} | gain % | ΔBIC | size | ± | "
+        "unit | significant |",
         "| --- | ---: | ---: | ---: | ---: | ---: | --- | --- |",
     ]
     for c in diagnosis.candidates:
@@ -118,7 +130,7 @@ def _candidate_table(diagnosis: Diagnosis) -> list[str]:
             table.append(f"| {c.id} | n/a | | | | | | {c.note} |")
             continue
         table.append(
-            f"| {c.id} | {c.heldout_rmse_mm:.4g} | {c.gain_pct:.1f} | "
+            f"| {c.id} | {c.heldout_rmse:.4g} | {c.gain_pct:.1f} | "
             f"{c.delta_bic:.1f} | {c.size:.4g} | {c.size_stderr:.2g} | "
             f"{c.size_unit} | {'yes' if c.significant else 'no'} |"
         )
@@ -129,8 +141,9 @@ def write_diagnosis_report(out, diagnosis: Diagnosis, tests) -> list[pathlib.Pat
     """Write the diagnosis report to the folder `out` (created if needed).
 
     Files: `diagnosis.json` ([`jaxcable.Diagnosis.to_json`][]), `summary.md`,
-    `residuals.png` (model minus measured elongation vs time, base and the named
-    extension, before/after, held-out part shaded), `candidates.png` (held-out gain
+    `residuals.png` (model minus measured value of each test's scored channel vs
+    time, in the diagnosis's unit, base and the named extension, before/after,
+    held-out part shaded), `candidates.png` (held-out gain
     of every candidate against the threshold) and `structure.png` (correlation of the
     base residuals with each test condition).
 

@@ -71,9 +71,9 @@ def time_axis(time: np.ndarray) -> tuple[np.ndarray, str, bool]:
 
 
 def residual_axes(ax, title: str, label: str, log: bool, unit: str = "mm") -> None:
-    """Label a panel of model minus measured elongation (or force, `unit` "N")
-    against time: the zero line, the title, the time axis (`label`, log scale when
-    `log`) and a grid."""
+    """Label a panel of model minus measured value against time: the zero line,
+    the title, the time axis (`label`, log scale when `log`), a grid, and the
+    residual's `unit` (mm of elongation, N of force, or noise units)."""
     ax.axhline(0.0, color="0.3", lw=0.6)
     ax.set_title(title, fontsize=9)
     if log:
