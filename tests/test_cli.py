@@ -84,7 +84,7 @@ def test_simulate_params_override_defaults(tmp_path):
 
 # (file contents, line, column) of the first problem.
 _BAD_HISTORIES = {
-    "missing_column": ("# length_mm: 300\ntime_s,elongation_mm\n0,0\n", 2, "force_N"),
+    "missing_column": ("# length_mm: 300\ntime_s,temperature_C\n0,0\n", 2, "force_N"),
     "non_numeric": ("# length_mm: 300\ntime_s,force_N\n0,0\n1,abc\n", 4, "force_N"),
     "nan": ("# length_mm: 300\ntime_s,force_N\n0,0\n1,NaN\n", 4, "force_N"),
     "time_not_increasing": (
@@ -228,6 +228,7 @@ def test_simulate_protocol_matches_python_api(tmp_path, capsys):
         "rate_mm_per_min": 6.0,
         "protocol": "protocol.json",
         "model": "integrated",
+        "control": "force",
     }
 
 

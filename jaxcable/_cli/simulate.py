@@ -89,9 +89,9 @@ def _history_drive(args) -> tuple[TestData, str]:
         drive = resolve_control(data, "auto").control
     need = "force_N" if drive == "force" else "elongation_mm"
     if drive == "force" and not has_force:
-        raise CliError(
-            f"{args.input}: a force-driven history needs a {need} column (or use "
-            "--drive elongation with an elongation_mm column)."
+        # The reader's own located error for the missing force column.
+        read_located(
+            read_canonical, args.input, overrides={}, required=("time", "force")
         )
     if drive == "elongation" and data.elongation is None:
         raise CliError(
