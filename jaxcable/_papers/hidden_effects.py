@@ -34,14 +34,24 @@ only the samples (`effect_elongation(..., humidity=recorded)`).
 
 The sizes (`OUT_OF_CATALOGUE[effect]["size"]`) make the fitted base model miss each
 effect clearly: on the held-out last 30 % of every test its RMSE is at least twice
-the floor (the data-generating model's held-out RMSE) on most seeds, measured by
-`scripts/hidden_effect_excess.py` (10 seeds, 100-109; median base / floor):
+the floor, the data-generating model's held-out RMSE (driven by the recorded force
+and humidity, as a diagnosis drives a model: 5 um of elongation noise plus the
+response to the force noise, and for `mechano_sorptive` the humidity seen only at the
+samples), on every seed. Measured under load on 2 shared CPU cores with
+`python scripts/hidden_effect_excess.py --seeds 10 --jobs 2` (seeds 100-109, the base
+`IntegratedModel` fitted by `jaxcable.diagnose(tests, candidates=[])`):
 
-| effect | size | base / floor, median (min-max) | >= 2x |
-| --- | ---: | ---: | ---: |
-| `mechano_sorptive` | 4e-12 1/(Pa %RH) | see the script | |
-| `cyclic_softening` | 0.02 per cycle | see the script | |
-| `clamp_slip` | 4e-10 m/(N s) | see the script | |
+| effect | size | base / floor, median (min-max) | >= 2x | floor, um |
+| --- | ---: | ---: | ---: | ---: |
+| `mechano_sorptive` | 4e-12 1/(Pa %RH) | 5.88 (3.33-10.17) | 10/10 | 8.57 |
+| `mechano_sorptive` (weaker) | 2e-12 1/(Pa %RH) | 3.44 (2.04-5.69) | 10/10 | 7.68 |
+| `cyclic_softening` (stronger) | 0.02 1/cycle | 13.56 (12.25-18.03) | 10/10 | 7.24 |
+| `cyclic_softening` | 0.01 1/cycle | 6.78 (6.57-9.16) | 10/10 | 7.26 |
+| `clamp_slip` | 4e-10 m/(N s) | 6.69 (5.17-8.58) | 10/10 | 7.29 |
+| `clamp_slip` (weaker) | 2e-10 m/(N s) | 3.33 (2.59-4.52) | 10/10 | 7.28 |
+
+The data-generating model's held-out gain over the base is 70-94 % at these sizes.
+The weaker sizes (`"weaker"`) are at the edge of "clearly" (minimum 2.0-2.6x).
 """
 
 import numpy as np
@@ -61,25 +71,29 @@ HUMIDITY_RESOLUTION = 0.1
 HUMIDITY_OFFSET = 1.0
 
 # Each out-of-catalogue effect: its size (the data sets' default), its parameter and
-# unit, the recorded covariate it is tied to (None when it is tied to none), and the
-# size of the one-seed tests of `make test` (about 3x).
+# unit, the recorded covariate it is tied to (None when it is tied to none), the
+# weaker sizes measured (run by `benchmarks/diagnose_matrix.py --sweep`) and the size
+# of one-seed tests (3x).
 OUT_OF_CATALOGUE: dict[str, dict] = {
     "mechano_sorptive": {
         "size": 4e-12,
+        "weaker": (2e-12,),
         "parameter": "m",
         "unit": "1/(Pa %RH)",
         "covariate": "humidity_pct",
         "test": 1.2e-11,
     },
     "cyclic_softening": {
-        "size": 0.02,
+        "size": 0.01,
+        "weaker": (),
         "parameter": "s",
         "unit": "1/cycle",
         "covariate": None,
-        "test": 0.06,
+        "test": 0.03,
     },
     "clamp_slip": {
         "size": 4e-10,
+        "weaker": (2e-10,),
         "parameter": "k",
         "unit": "m/(N s)",
         "covariate": None,
