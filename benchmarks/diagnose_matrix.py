@@ -72,7 +72,7 @@ def _heldout_um(tests, predictions):
         first = heldout_start(len(t.time), 0.3)
         r = np.asarray(t.elongation)[first:] - np.asarray(p)[first:]
         sq, n = sq + float(np.sum(r**2)), n + r.size
-    return 1e6 * np.sqrt(sq / n)
+    return float(1e6 * np.sqrt(sq / n))
 
 
 def effect_magnitude(effect, seed, size):
@@ -129,17 +129,18 @@ def run(effect, seed, size):
         "outside_catalogue": outside,
         "named": d.named_cause,
         "verdict": getattr(d, "verdict", None),
-        "wrong_catalogue_cause": d.named_cause in jc.EXTENSIONS
-        and d.named_cause != effect,
+        "wrong_catalogue_cause": bool(
+            d.named_cause in jc.EXTENSIONS and d.named_cause != effect
+        ),
         "covariate": covariate,
-        "covariate_named": None if covariate is None else covariate in said,
+        "covariate_named": None if covariate is None else bool(covariate in said),
         "floor_um": 1e3 * floor,
         "effect_rms_um": rms_um,
         "effect_max_um": max_um,
         "base_heldout_um": base_um,
         "extended_heldout_um": 1e3 * d.extended_heldout_rmse_mm,
-        "true_heldout_um": 1e3 * floor,
-        "true_gain_pct": true_gain,
+        "true_heldout_um": float(1e3 * floor),
+        "true_gain_pct": float(true_gain),
         "discovered_gain_pct": gains.get("discovered"),
         "discovered_share_of_true_gain": (
             None
@@ -328,15 +329,19 @@ def _outside_counts(sel) -> dict:
         return {}
     share = [r["discovered_share_of_true_gain"] for r in sel]
     return {
-        "no_wrong_catalogue_cause": sum(not r["wrong_catalogue_cause"] for r in sel),
+        "no_wrong_catalogue_cause": int(
+            sum(not r["wrong_catalogue_cause"] for r in sel)
+        ),
         "covariate_named": None
         if sel[0]["covariate"] is None
-        else sum(bool(r["covariate_named"]) for r in sel),
+        else int(sum(bool(r["covariate_named"]) for r in sel)),
         "true_gain_pct": float(np.median([r["true_gain_pct"] for r in sel])),
         "base_over_true": float(
             np.median([r["base_heldout_um"] / r["true_heldout_um"] for r in sel])
         ),
-        "discovered_half_true_gain": sum(x is not None and x >= 0.5 for x in share),
+        "discovered_half_true_gain": int(
+            sum(x is not None and bool(x >= 0.5) for x in share)
+        ),
     }
 
 
@@ -378,7 +383,11 @@ def _markdown(matrix, limits, names, document) -> str:
             "| --- | ---: | ---: | ---: | ---: | ---: |",
         ]
         for e, r in outside:
-            cov = "-" if r["covariate_named"] is None else f"{r['covariate_named']}"
+            cov = (
+                "-"
+                if r["covariate_named"] is None
+                else f"{r['covariate_named']}/{r['seeds']}"
+            )
             lines.append(
                 f"| `{e}` | {r['no_wrong_catalogue_cause']}/{r['seeds']} | {cov} | "
                 f"{r['base_over_true']:.2f} | {r['true_gain_pct']:.0f} % | "
