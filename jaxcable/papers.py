@@ -6,12 +6,14 @@ submodule, `from jaxcable import papers`, not part of the library's root namespa
   `sk78_qualitative_checks`) and the calibration of the default parameters
   (`calibrate_sk78`);
 - the synthetic data: tests with one hidden effect, for checking a diagnosis
-  (`hidden_effect_dataset`, `hidden_effect_model`, `HIDDEN_EFFECTS`), and the bundled
+  (`hidden_effect_dataset`, `hidden_effect_model`, `HIDDEN_EFFECTS`; effects outside
+  the diagnosis catalogue, `OUT_OF_CATALOGUE`, with `truth_elongations`), and the bundled
   data set of `make demo` (`bundled_dataset`).
 """
 
 from ._papers import (
     HIDDEN_EFFECTS as HIDDEN_EFFECTS,
+    OUT_OF_CATALOGUE as OUT_OF_CATALOGUE,
     SK78_START as SK78_START,
     SK78_TARGETS as SK78_TARGETS,
     Calibration as Calibration,
@@ -23,4 +25,5 @@ from ._papers import (
     park_protocol as park_protocol,
     sk78_qualitative_checks as sk78_qualitative_checks,
     sk78_targets_report as sk78_targets_report,
+    truth_elongations as truth_elongations,
 )

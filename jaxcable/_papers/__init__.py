@@ -3,6 +3,11 @@ from .calibration import (
     Calibration as Calibration,
     calibrate_sk78 as calibrate_sk78,
 )
+from .hidden_effects import (
+    OUT_OF_CATALOGUE as OUT_OF_CATALOGUE,
+    effect_elongation as effect_elongation,
+    humidity_climate as humidity_climate,
+)
 from .park import (
     SK78_TARGETS as SK78_TARGETS,
     Target as Target,
@@ -22,4 +27,5 @@ from .synthetic import (
     hidden_effect_protocol as hidden_effect_protocol,
     synthesize as synthesize,
     synthesize_history as synthesize_history,
+    truth_elongations as truth_elongations,
 )

@@ -20,6 +20,7 @@ from .._models import (
     IntegratedModel,
     TerminationCompliance,
 )
+from .hidden_effects import OUT_OF_CATALOGUE, effect_elongation
 from .park import park_protocol
 
 
@@ -35,6 +36,7 @@ def synthesize(
     temperature_C: float = 21.0,
     temperature_swing_C: float = 0.4,
     metadata: dict | None = None,
+    added=None,
 ) -> TestData:
     """Simulate a rate-driven test and add measurement noise.
 
@@ -53,22 +55,32 @@ def synthesize(
     - `temperature_C`, `temperature_swing_C`: lab temperature, a daily sinusoid of this
         amplitude around this mean plus 0.05 C of sensor noise, °C (recorded only).
     - `metadata`: extra `# key: value` metadata.
+    - `added`: optional `added(time, force) -> (elongation, columns)`, an effect
+        outside `model`: its elongation (m) is added to the simulated one before the
+        noise, its columns (name -> values, recorded with their own noise) become
+        `extra` columns. Given the noise-free time and force of the simulation.
 
     **Returns:**
 
-    A [`jaxcable.TestData`][] with time, force, elongation and temperature, and
-    `control: force` in its metadata (fits drive it by its force history).
+    A [`jaxcable.TestData`][] with time, force, elongation and temperature (and the
+    columns of `added`), and `control: force` in its metadata (fits drive it by its
+    force history).
     """
     traj = simulate_rate_test(model, cable, protocol)
     rng = np.random.default_rng(seed)
     time = np.asarray(traj.time, dtype=float)
     n = time.shape[0]
+    clean = np.asarray(traj.elongation, dtype=float)
+    extra = {}
+    if added is not None:
+        more, extra = added(time, np.asarray(traj.force, dtype=float))
+        clean = clean + more
     force = np.clip(
         np.asarray(traj.force) + force_noise * rng.standard_normal(n), 0, None
     )
     deadband = 3.0 * force_noise if force_deadband is None else force_deadband
     force = np.where(force < deadband, 0.0, force)
-    elongation = np.asarray(traj.elongation) + elongation_noise * rng.standard_normal(n)
+    elongation = clean + elongation_noise * rng.standard_normal(n)
     temperature = (
         temperature_C
         + temperature_swing_C * np.sin(2 * np.pi * time / 86400.0 + rng.uniform(0, 6.3))
@@ -88,6 +100,7 @@ def synthesize(
         force=force,
         elongation=elongation,
         temperature=temperature,
+        extra=extra,
         metadata=meta,
     )
 
@@ -306,6 +319,31 @@ def hidden_effect_model(
     return cls(base, **{cls.SIZE_FIELD: value, **spec["fixed"]})
 
 
+def _design_cable(length, rate, temp) -> Cable:
+    """The cable of one row of `HIDDEN_EFFECT_DESIGN`."""
+    return Cable(
+        length=length * 1e-3, speed=rate * 1e-3 / 60, temperature=temp + 273.15
+    )
+
+
+def _adder(effect, cable, *, seed, index, size):
+    """`synthesize`'s `added` for an out-of-catalogue effect."""
+
+    def added(time, force):
+        return effect_elongation(
+            effect,
+            time,
+            force,
+            length=float(cable.length),
+            diameter=float(cable.diameter),
+            size=size,
+            seed=seed,
+            index=index,
+        )
+
+    return added
+
+
 def hidden_effect_dataset(
     effect: str | None,
     *,
@@ -318,27 +356,29 @@ def hidden_effect_dataset(
 
     Six tests of `HIDDEN_EFFECT_DESIGN` (three lengths, two rates, three force levels,
     three temperatures) on the protocol of `hidden_effect_protocol`, simulated by
-    `hidden_effect_model(effect, seed=seed, size=size)`; each test's noise is drawn
-    from `seed` too.
+    `hidden_effect_model(effect, seed=seed, size=size)`, or for an effect outside the
+    catalogue by the unwrapped base model plus the effect's elongation (see
+    `jaxcable._papers.hidden_effects`); each test's noise is drawn from `seed` too.
 
     **Arguments:**
 
-    - `effect`: an extension id of [`jaxcable.EXTENSIONS`][], or None (no effect).
+    - `effect`: an extension id of [`jaxcable.EXTENSIONS`][], an id of
+        `OUT_OF_CATALOGUE`, or None (no effect).
     - `seed`: the seed of the base parameters and of the noise.
-    - `size`: the effect's size in its extension's `SIZE_FIELD` unit (default:
-        `HIDDEN_EFFECTS[effect]["size"]`).
+    - `size`: the effect's size in its extension's `SIZE_FIELD` unit, or its
+        `OUT_OF_CATALOGUE` unit (default: the documented size).
     - `elongation_noise`, `force_noise`: standard deviations, m and N.
 
     **Returns:**
 
-    Six [`jaxcable.TestData`][] with time, force, elongation and temperature.
+    Six [`jaxcable.TestData`][] with time, force, elongation and temperature (and
+    the effect's covariate columns, e.g. `humidity_pct` for `mechano_sorptive`).
     """
-    model = hidden_effect_model(effect, seed=seed, size=size)
+    outside = effect in OUT_OF_CATALOGUE
+    model = hidden_effect_model(None if outside else effect, seed=seed, size=size)
     tests = []
     for i, (length, rate, force, temp) in enumerate(HIDDEN_EFFECT_DESIGN):
-        cable = Cable(
-            length=length * 1e-3, speed=rate * 1e-3 / 60, temperature=temp + 273.15
-        )
+        cable = _design_cable(length, rate, temp)
         tests.append(
             synthesize(
                 model,
@@ -353,6 +393,66 @@ def hidden_effect_dataset(
                     "id": f"L{length:.0f}-v{rate:.0f}-F{force:.0f}-T{temp:.0f}",
                     "hidden_effect": effect or "none",
                 },
+                added=(
+                    _adder(effect, cable, seed=seed, index=i, size=size)
+                    if outside
+                    else None
+                ),
             )
         )
     return tests
+
+
+def truth_elongations(
+    effect: str | None,
+    *,
+    seed: int,
+    size: float | None = None,
+    tests: list[TestData] | None = None,
+) -> list[np.ndarray]:
+    """The data-generating model's elongation of every test of
+    `hidden_effect_dataset(effect, seed=seed, size=size)`, m: the reference for the
+    true model's held-out gain.
+
+    **Arguments:**
+
+    - `effect`, `seed`, `size`: as in `hidden_effect_dataset`.
+    - `tests`: None for the noise-free truth (the protocol's exact force); or the
+        data set's tests, to drive the true model by their recorded force (and
+        recorded covariates), as a diagnosis drives every model it scores.
+
+    **Returns:**
+
+    One array per test, the elongation at its samples, m.
+    """
+    outside = effect in OUT_OF_CATALOGUE
+    model = hidden_effect_model(None if outside else effect, seed=seed, size=size)
+    out = []
+    for i, (length, rate, force, temp) in enumerate(HIDDEN_EFFECT_DESIGN):
+        cable = _design_cable(length, rate, temp)
+        if tests is None:
+            traj = simulate_rate_test(model, cable, hidden_effect_protocol(force))
+            time, f, humidity = np.asarray(traj.time), np.asarray(traj.force), None
+        else:
+            t = tests[i]
+            time, f = np.asarray(t.time, float), np.asarray(t.force, float)
+            traj = simulate_force_history(model, cable, time, f)
+            humidity = t.extra.get("humidity_pct")
+        e = np.asarray(traj.elongation, dtype=float)
+        if outside:
+            kw = dict(length=float(cable.length), diameter=float(cable.diameter))
+            e = (
+                e
+                + effect_elongation(
+                    effect,
+                    time,
+                    f,
+                    size=size,
+                    seed=seed,
+                    index=i,
+                    humidity=humidity,
+                    **kw,
+                )[0]
+            )
+        out.append(e)
+    return out
