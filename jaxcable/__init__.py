@@ -8,7 +8,9 @@ from ._cache import (
 from ._diagnose import (
     Candidate as Candidate,
     Diagnosis as Diagnosis,
+    DiscoveryResult as DiscoveryResult,
     diagnose as diagnose,
+    discover as discover,
     residual_structure as residual_structure,
 )
 from ._drive import (
@@ -62,6 +64,8 @@ from ._models import (
     BoucWenState as BoucWenState,
     BurgersModel as BurgersModel,
     BurgersState as BurgersState,
+    DiscoveredTerm as DiscoveredTerm,
+    DiscoveredTermState as DiscoveredTermState,
     FiveElementModel as FiveElementModel,
     FiveElementState as FiveElementState,
     Hereditary as Hereditary,

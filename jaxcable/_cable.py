@@ -11,7 +11,17 @@ from . import _checks
 
 
 # The fields of a Cable, in order (one place to list them for checks and batching).
-CABLE_FIELDS = ("length", "diameter", "speed", "breaking_load", "temperature")
+CABLE_FIELDS = (
+    "length",
+    "diameter",
+    "speed",
+    "breaking_load",
+    "temperature",
+    "covariate",
+)
+
+# The fields that must be positive (a covariate may take any sign).
+_POSITIVE_FIELDS = CABLE_FIELDS[:-1]
 
 # Kelvin at 0 °C: data files record temperature in °C, Cable holds kelvin.
 ZERO_CELSIUS = 273.15
@@ -51,6 +61,11 @@ class Cable(eqx.Module):
     - `temperature`: temperature of the cable, K (default 293.15 K = 20 °C). Only
         temperature-dependent models read it (e.g. [`jaxcable.TemperatureShift`][]);
         the fit and the drivers set it per sample from a test's temperature record.
+    - `covariate`: the value of one recorded covariate column at this sample, in the
+        unit of that column (default 0.0): humidity, moisture content, a second
+        thermocouple, ... Only covariate-dependent models read it (e.g.
+        `jaxcable.DiscoveredTerm`); the fit sets it per sample from the column named
+        by its `covariate` argument (see [`jaxcable.pad_tests`][]). Any sign.
     """
 
     length: Float[Array, "*batch"] = eqx.field(converter=jnp.asarray)
@@ -66,9 +81,10 @@ class Cable(eqx.Module):
     temperature: Float[Array, "*batch"] = eqx.field(
         converter=jnp.asarray, default=293.15
     )
+    covariate: Float[Array, "*batch"] = eqx.field(converter=jnp.asarray, default=0.0)
 
     def __check_init__(self):
-        for name in CABLE_FIELDS:
+        for name in _POSITIVE_FIELDS:
             value = getattr(self, name)
             if not _checks.is_concrete(value):
                 continue

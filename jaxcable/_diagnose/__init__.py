@@ -1,4 +1,5 @@
 from .diagnose import diagnose as diagnose
+from .discover import DiscoveryResult as DiscoveryResult, discover as discover
 from .elongations import (
     model_elongations as model_elongations,
     model_outputs as model_outputs,

@@ -31,6 +31,9 @@ class PaddedTests(eqx.Module):
         samples the test's own mask excludes (e.g. slack).
     - `temperature`: temperature at each sample, K (the test's temperature record,
         else its `Cable.temperature`).
+    - `covariate`: the recorded covariate column at each sample, in that column's
+        unit (0 where `pad_tests` was given no `covariate`); the fit sets
+        `Cable.covariate` from it per sample.
     - `cable`: a batched [`jaxcable.Cable`][], one per test.
     - `drive`: each test's drive, `"force"` (its force history drives the model, the
         elongation is scored) or `"elongation"` (the elongation drives, the solved
@@ -47,6 +50,7 @@ class PaddedTests(eqx.Module):
     simulate: Bool[Array, "tests samples"]
     weight: Float[Array, "tests samples"]
     temperature: Float[Array, "tests samples"]
+    covariate: Float[Array, "tests samples"]
     cable: Cable
     drive: tuple[str, ...] = eqx.field(static=True)
     scale: Float[Array, " tests"]
@@ -128,6 +132,7 @@ class _Row:
     elongation: np.ndarray  # 0 where `mask` is False
     mask: np.ndarray  # True where the sample is fitted
     temperature: np.ndarray  # K
+    covariate: np.ndarray  # the unit of the covariate column (0 without one)
     cable: Cable
     drive: str
 
@@ -169,7 +174,25 @@ def _temperature(test, where: str, time: np.ndarray, cable: Cable) -> np.ndarray
     return temperature
 
 
-def _checked_row(test, index: int, drive: str) -> _Row:
+def _covariate(test, where: str, time: np.ndarray, name: str | None) -> np.ndarray:
+    """The test's covariate column `name` (its unit), else 0 throughout."""
+    if name is None:
+        return np.zeros(time.shape)
+    extra = getattr(test, "extra", None) or {}
+    if name not in extra:
+        raise ValueError(
+            f"`{where}` has no column {name!r} (the `covariate`); its extra columns "
+            f"are {sorted(extra)}."
+        )
+    values = np.asarray(extra[name], float)
+    _checks.require_same_shape(
+        **{f"{where}.time": time, f"{where}.extra[{name!r}]": values}
+    )
+    _checks.require_finite(f"{where}.extra[{name!r}]", values)
+    return values
+
+
+def _checked_row(test, index: int, drive: str, covariate: str | None = None) -> _Row:
     """Test `index` checked (errors name `tests[index]` and the field); an
     elongation-driven test needs its elongation at every sample."""
     where = f"tests[{index}] ({test_id(test, index)})"
@@ -203,6 +226,7 @@ def _checked_row(test, index: int, drive: str) -> _Row:
         else np.where(mask, elongation, 0.0),
         mask=mask,
         temperature=_temperature(test, where, time, cable),
+        covariate=_covariate(test, where, time, covariate),
         cable=cable,
         drive=drive,
     )
@@ -249,7 +273,9 @@ def _scales(rows: list[_Row]) -> np.ndarray:
     return np.array(out)
 
 
-def pad_tests(tests, *, drive=None, multiple: int = 16) -> PaddedTests:
+def pad_tests(
+    tests, *, drive=None, multiple: int = 16, covariate: str | None = None
+) -> PaddedTests:
     """Check, pad and stack tests for [`jaxcable.residuals`][] and the fit kernel.
 
     Each test needs `time` (s), `force` (N), `elongation` (m) and `.cable()` (a
@@ -265,6 +291,9 @@ def pad_tests(tests, *, drive=None, multiple: int = 16) -> PaddedTests:
         test's `metadata['control']`, else detected from its data).
     - `multiple`: the padded length is rounded up to a multiple of this, so that data
         sets of similar size reuse one compiled kernel.
+    - `covariate`: the name of an extra column of every test (`test.extra[name]`,
+        in its own unit) read into `PaddedTests.covariate`, the per-sample
+        `Cable.covariate` of the fit; None (default): 0 throughout.
 
     **Returns:**
 
@@ -274,11 +303,14 @@ def pad_tests(tests, *, drive=None, multiple: int = 16) -> PaddedTests:
 
     `ValueError` naming `tests[i]` and the field: no elongation, fewer than two
     samples, non-finite values, time not strictly increasing, negative force or
-    force above the breaking load, a mask of the wrong shape or masking every sample.
+    force above the breaking load, a mask of the wrong shape or masking every sample,
+    no `covariate` column or a non-finite one.
     """
     tests = as_test_list(tests)
     drives = [d.control for d in resolve_drives(tests, drive)]
-    rows = [_checked_row(t, i, d) for i, (t, d) in enumerate(zip(tests, drives))]
+    rows = [
+        _checked_row(t, i, d, covariate) for i, (t, d) in enumerate(zip(tests, drives))
+    ]
     longest = max(r.time.shape[0] for r in rows)
     length = -(-longest // multiple) * multiple
 
@@ -314,6 +346,7 @@ def pad_tests(tests, *, drive=None, multiple: int = 16) -> PaddedTests:
         simulate=jnp.asarray(padded([np.ones_like(r.mask) for r in rows], False)),
         weight=jnp.asarray(padded([r.mask for r in rows], False).astype(float), dtype),
         temperature=jnp.asarray(padded([r.temperature for r in rows]), dtype),
+        covariate=jnp.asarray(padded([r.covariate for r in rows]), dtype),
         cable=cable,
         drive=tuple(drives),
         scale=jnp.asarray(_scales(rows), dtype),

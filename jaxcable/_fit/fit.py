@@ -163,6 +163,7 @@ def fit(
     key: PRNGKeyArray | None = None,
     throw: bool = True,
     drive="auto",
+    covariate: str | None = None,
 ) -> FitResult:
     """Fit a model's parameters to one or many tests by least squares.
 
@@ -262,6 +263,9 @@ def fit(
         best start with `converged=False` and the solver's `message`.
     - `drive`: `"auto"` (default; see Drives above), `"force"`, `"elongation"`, or a
         sequence of these, one per test.
+    - `covariate`: the name of an extra column of every test (`test.extra[name]`)
+        set as `Cable.covariate` at each sample, for a covariate-dependent model
+        (e.g. `jaxcable.DiscoveredTerm`); default None, 0 throughout.
 
     **Returns:**
 
@@ -277,7 +281,9 @@ def fit(
     """
     solver = _checked_solver(multistart, max_steps, spread, solver)
     test_list = as_test_list(tests)
-    problem, u_user = make_problem(model, test_list, fit, per_test, transforms, drive)
+    problem, u_user = make_problem(
+        model, test_list, fit, per_test, transforms, drive, covariate
+    )
     layout = problem.layout
     num_samples = np.asarray(problem.data.weight).sum(axis=1).astype(int)
     n, p = int(num_samples.sum()), layout.size

@@ -41,7 +41,7 @@ _DOMAIN_MESSAGE = (
 
 
 def _elongation_history(
-    model, cable, time, force, mask, temperature
+    model, cable, time, force, mask, temperature, covariate
 ) -> tuple[Float[Array, " samples"], RESULTS]:
     """The elongation (m) of [`jaxcable.simulate_force_history`][] and its status.
 
@@ -50,26 +50,29 @@ def _elongation_history(
     elongation: inside the solver's loop, XLA on CPU copies a scan's stacked outputs
     at every step, and a full `Trajectory` (every state field, times the Jacobian's
     tangents) made each Jacobian about 20x slower than this. The cable's temperature
-    is the sample's (K), for temperature-dependent models. The forces are used as
+    is the sample's (K), for temperature-dependent models, and so is its covariate
+    (for covariate-dependent ones). The forces are used as
     measured (no deadband), so the fit's model is the one every other entry point
     simulates.
     """
 
     def body(carry: CableState, x):
-        t, f, m, temp = x
-        here = eqx.tree_at(lambda c: c.temperature, cable, temp)
+        t, f, m, temp, cov = x
+        here = eqx.tree_at(lambda c: (c.temperature, c.covariate), cable, (temp, cov))
         new, _ = step(model, here, carry, t, f)
         new = jax.tree_util.tree_map(lambda a, b: jnp.where(m, a, b), new, carry)
         return new, new.strain
 
     final, strain = jax.lax.scan(
-        body, init_state(model, cable, time[0]), (time, force, mask, temperature)
+        body,
+        init_state(model, cable, time[0]),
+        (time, force, mask, temperature, covariate),
     )
     return strain * cable.length, final.result
 
 
 def _force_history(
-    model, cable, time, elongation, mask, temperature
+    model, cable, time, elongation, mask, temperature, covariate
 ) -> tuple[Float[Array, " samples"], RESULTS]:
     """The force (N) of [`jaxcable.simulate_elongation_history`][] and its status:
     the same drive step (a Newton solve per sample) in a scan that keeps only the
@@ -80,13 +83,15 @@ def _force_history(
     )
 
     def body(carry: CableState, x):
-        t, e, m, temp = x
-        here = eqx.tree_at(lambda c: c.temperature, cable, temp)
+        t, e, m, temp, cov = x
+        here = eqx.tree_at(lambda c: (c.temperature, c.covariate), cable, (temp, cov))
         new, _ = drive.step(model, here, carry, ElongationSample(t, e, m))
         return new, new.force
 
     final, force = jax.lax.scan(
-        body, init_state(model, cable, time[0]), (time, elongation, mask, temperature)
+        body,
+        init_state(model, cable, time[0]),
+        (time, elongation, mask, temperature, covariate),
     )
     return force, final.result
 
@@ -129,13 +134,13 @@ def residuals(
     in_axes = jax.tree_util.tree_map(lambda x: 0 if jnp.ndim(x) == 1 else None, params)
 
     def kernel(history):
-        def run(p, cable, time, driving, simulate, weight, measured, temperature):
+        def run(p, cable, time, driving, simulate, weight, measured, temp, cov):
             model = eqx.combine(p, static)
-            value, result = history(model, cable, time, driving, simulate, temperature)
+            value, result = history(model, cable, time, driving, simulate, temp, cov)
             r = jnp.where(weight > 0, value - measured, 0.0)
             return jnp.where(result == RESULTS.successful, r, jnp.nan)
 
-        return jax.vmap(run, in_axes=(in_axes, 0, 0, 0, 0, 0, 0, 0))
+        return jax.vmap(run, in_axes=(in_axes, 0, 0, 0, 0, 0, 0, 0, 0))
 
     def group(index, history, driving, scored):
         # Static indices: each drive's tests are gathered and run in their own vmap.
@@ -156,6 +161,7 @@ def residuals(
             take(tests.weight),
             take(scored),
             take(tests.temperature),
+            take(tests.covariate),
         )
         return r / take(tests.scale)[:, None]
 
@@ -331,12 +337,14 @@ def make_problem(
     per_test: Sequence[str] | None,
     transforms: Mapping[str, str] | None,
     drive=None,
+    covariate: str | None = None,
 ) -> tuple[Problem, Float[Array, " p"]]:
     """The least-squares problem of [`jaxcable.fit`][] and [`jaxcable.make_loss`][].
 
     **Arguments:**
 
-    - `model`, `fit`, `per_test`, `transforms`, `drive`: as in [`jaxcable.fit`][].
+    - `model`, `fit`, `per_test`, `transforms`, `drive`, `covariate`: as in
+        [`jaxcable.fit`][].
     - `tests`: a list of tests (see `as_test_list`).
 
     **Returns:**
@@ -352,7 +360,7 @@ def make_problem(
             "`model` must be a jaxcable model (an AbstractCableModel instance such as "
             f"jaxcable.IntegratedModel()), got {type(model).__name__}."
         )
-    data = pad_tests(tests, drive=drive)
+    data = pad_tests(tests, drive=drive, covariate=covariate)
     declared = _checked_model(model, data, tests)
     available = list(declared)
     per = _names(model, available, "per_test", per_test)

@@ -21,6 +21,7 @@ def model_responses(
     result: FitResult | AbstractCableModel,
     tests: Sequence,
     drive=None,
+    covariate: str | None = None,
 ) -> list[np.ndarray]:
     """The model's value of each test's scored channel at every sample: the
     elongation (m) of a force-driven test, the force (N) of an elongation-driven one.
@@ -32,6 +33,7 @@ def model_responses(
     - `tests`: the tests.
     - `drive`: as in [`jaxcable.fit`][]; default the result's drives (a model:
         `"auto"`).
+    - `covariate`: as in [`jaxcable.fit`][] (the column set as `Cable.covariate`).
 
     **Returns:**
 
@@ -54,7 +56,7 @@ def model_responses(
         )
         for t, d in zip(tests, drives)
     ]
-    padded = pad_tests(unmasked, drive=drives)
+    padded = pad_tests(unmasked, drive=drives, covariate=covariate)
     model = result.model if isinstance(result, FitResult) else result
     params, static = eqx.partition(model, eqx.is_inexact_array)
     r = (

@@ -20,6 +20,8 @@ from .extensions import (
     AbstractTemperatureShift as AbstractTemperatureShift,
     BeddingIn as BeddingIn,
     BeddingInState as BeddingInState,
+    DiscoveredTerm as DiscoveredTerm,
+    DiscoveredTermState as DiscoveredTermState,
     Hereditary as Hereditary,
     HereditaryState as HereditaryState,
     SecondRetardation as SecondRetardation,
@@ -31,6 +33,7 @@ from .extensions import (
     TemperatureShift as TemperatureShift,
     TemperatureShiftWLF as TemperatureShiftWLF,
     TerminationCompliance as TerminationCompliance,
+    discovered as discovered,
     log_shift_arrhenius as log_shift_arrhenius,
     log_shift_wlf as log_shift_wlf,
 )

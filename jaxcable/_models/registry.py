@@ -10,7 +10,7 @@ import dataclasses
 
 from .base import AbstractCableModel, AbstractExtension
 from .baselines import BoucWenModel, BurgersModel, HookeModel
-from .extensions import EXTENSIONS
+from .extensions import EXTENSIONS, DiscoveredTerm
 from .park import IntegratedModel
 from .piao import FiveElementModel
 
@@ -126,7 +126,7 @@ _BY_CLASS: dict[type, ModelEntry] = {e.cls: e for e in MODELS}
 
 # Every class a PARAMS.json may name, by class name: the models and the extensions.
 CLASSES_BY_NAME: dict[str, type] = {
-    cls.__name__: cls for cls in (*_BY_CLASS, *EXTENSIONS.values())
+    cls.__name__: cls for cls in (*_BY_CLASS, *EXTENSIONS.values(), DiscoveredTerm)
 }
 
 

@@ -34,6 +34,11 @@ from .creep import (
     StressNonlinearCreep as StressNonlinearCreep,
     StressNonlinearCreepState as StressNonlinearCreepState,
 )
+from .discovered import (
+    TERMS as TERMS,
+    DiscoveredTerm as DiscoveredTerm,
+    DiscoveredTermState as DiscoveredTermState,
+)
 from .temperature import (
     AbstractTemperatureShift as AbstractTemperatureShift,
     TemperatureShift as TemperatureShift,
@@ -56,4 +61,5 @@ EXTENSIONS: dict[str, type[AbstractExtension]] = {
     )
 }
 """The candidate extensions of the diagnosis, id -> class, in a fixed order: creep
-changes first, then temperature, then the apparatus."""
+changes first, then temperature, then the apparatus. ([`DiscoveredTerm`][], id
+`discovered`, is not a catalogue candidate: the discovery builds its terms.)"""

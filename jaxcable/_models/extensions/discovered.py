@@ -1,0 +1,276 @@
+r"""A strain found by sparse regression on the residual of a base model
+([`DiscoveredTerm`][]): d(eps_d)/dt = sum_k theta_k phi_k over a fixed library of
+terms (the stress, its rate, time under load, rest time, cycles, a recorded
+covariate, its rate, and products), each computable from the model's own inputs.
+
+The library is one function ([`term_increments`][]) of a step's end values, used
+both inside `advance` (scalars, traced) and host-side by the discovery on whole
+histories (arrays), so that the regression and the model integrate the same terms.
+"""
+
+from typing import ClassVar
+
+import equinox as eqx
+import jax.numpy as jnp
+from jaxtyping import Array, Float, Int, PyTree
+
+from ... import _checks
+from ..._cable import Cable
+from ..._results import RESULTS
+from ..base import (
+    AbstractCableModel,
+    AbstractExtension,
+    StrainParts,
+    add_parts,
+    state_zero,
+)
+from ..kernels import running_max, tension_time_step
+
+
+# Each term of the library: its symbol in an equation and its unit ("c" stands for
+# the covariate's unit). The term's coefficient theta has unit 1/s per unit of phi.
+TERMS: dict[str, tuple[str, str]] = {
+    "sigma": ("sigma", "Pa"),
+    "sigma_rate": ("d(sigma)/dt", "Pa/s"),
+    "sigma_abs_rate": ("|d(sigma)/dt|", "Pa/s"),
+    "time_loaded": ("t_load", "s"),
+    "time_rest": ("t_rest", "s"),
+    "cycles": ("N_cyc", "-"),
+    "c": ("c", "c"),
+    "c_rate": ("dc/dt", "c/s"),
+    "c_abs_rate": ("|dc/dt|", "c/s"),
+    "sigma_c": ("sigma * c", "Pa c"),
+    "sigma_c_abs_rate": ("sigma * |dc/dt|", "Pa c/s"),
+}
+"""The library of [`DiscoveredTerm`][]: term id -> (symbol, unit of phi)."""
+
+# The most terms one DiscoveredTerm carries (its fields theta0..theta3).
+MAX_TERMS = 4
+THETA_FIELDS = tuple(f"theta{k}" for k in range(MAX_TERMS))
+
+
+def theta_unit(term: str, covariate_unit: str = "c") -> str:
+    """The unit of the coefficient of `term`: 1/s per unit of phi (the covariate's
+    unit written `covariate_unit`)."""
+    unit = TERMS[term][1]
+    per_second = unit.endswith("/s")
+    unit = unit.removesuffix("/s")
+    unit = " ".join(covariate_unit if u == "c" else u for u in unit.split())
+    if unit == "-":
+        return "1/s"
+    if per_second:
+        return f"1/({unit})" if " " in unit else f"1/{unit}"
+    return f"1/({unit} s)"
+
+
+def term_increments(
+    sigma0, sigma1, c0, c1, dt, loaded0, loaded1, rest0, rest1, cycles0, cycles1
+) -> dict[str, Array]:
+    """The integral of each library term over a step (the rates exactly, the others
+    by the trapezoid rule), from the values at the step's start (0) and end (1):
+    stress sigma (Pa), covariate c (its unit), step dt (s), time under load and rest
+    time so far (s), cycles so far (-). Elementwise: scalars or whole histories.
+
+    A rate term's integral is its increment (no division by dt, so a step of dt = 0,
+    the first sample, is exact); an absolute rate's is the absolute increment.
+
+    **Returns:**
+
+    `{term: integral of phi over the step}`, in the unit of phi times s.
+    """
+    mean = lambda a, b: 0.5 * (a + b) * dt  # noqa: E731
+    abs_dc = jnp.abs(c1 - c0)
+    return {
+        "sigma": mean(sigma0, sigma1),
+        "sigma_rate": sigma1 - sigma0,
+        "sigma_abs_rate": jnp.abs(sigma1 - sigma0),
+        "time_loaded": mean(loaded0, loaded1),
+        "time_rest": mean(rest0, rest1),
+        "cycles": mean(cycles0, cycles1),
+        "c": mean(c0, c1),
+        "c_rate": c1 - c0,
+        "c_abs_rate": abs_dc,
+        "sigma_c": mean(sigma0 * c0, sigma1 * c1),
+        "sigma_c_abs_rate": 0.5 * (sigma0 + sigma1) * abs_dc,
+    }
+
+
+def cycle_count(variation, force_max):
+    """Equivalent full load cycles: the total variation of the force (N) over twice
+    its largest value so far (N); 0 before any load. Continuous in the force
+    history (no count of sign changes)."""
+    positive = force_max > 0
+    return jnp.where(positive, variation / (2.0 * jnp.where(positive, force_max, 1)), 0)
+
+
+class DiscoveredTermState(eqx.Module):
+    """Scan carry of [`jaxcable.DiscoveredTerm`][] (SI; the covariate in its unit).
+
+    **Fields:**
+
+    - `base`: the wrapped model's state.
+    - `started`: False until the first step (whose covariate has no predecessor).
+    - `force`: force of the previous sample, N.
+    - `covariate`: covariate of the previous sample, its unit.
+    - `force_max`: the largest force so far, N.
+    - `variation`: total variation of the force so far, N.
+    - `loaded`: time under load so far, s (the base's continuous tension clock).
+    - `rest`: time not under load so far, s.
+    - `strain`: the discovered strain eps_d.
+    """
+
+    base: PyTree
+    started: Array
+    force: Float[Array, ""]
+    covariate: Float[Array, ""]
+    force_max: Float[Array, ""]
+    variation: Float[Array, ""]
+    loaded: Float[Array, ""]
+    rest: Float[Array, ""]
+    strain: Float[Array, ""]
+
+
+class DiscoveredTerm(AbstractExtension[DiscoveredTermState]):
+    r"""A strain integrated from a sparse sum of library terms:
+
+        d(eps_d)/dt = sum_k theta_k phi_k,   eps = eps_base + eps_d (creep part),
+
+    each phi_k one of [`TERMS`][] (at most four, static strings in `terms`):
+
+    | term | phi | unit of phi | unit of theta |
+    | --- | --- | --- | --- |
+    | `sigma` | sigma = F / A | Pa | 1/(Pa s) |
+    | `sigma_rate` | d(sigma)/dt | Pa/s | 1/Pa |
+    | `sigma_abs_rate` | abs(d(sigma)/dt) | Pa/s | 1/Pa |
+    | `time_loaded` | time under load so far | s | 1/s^2 |
+    | `time_rest` | time not under load so far | s | 1/s^2 |
+    | `cycles` | equivalent load cycles, total variation of F / (2 max F) | - | 1/s |
+    | `c` | the covariate c (`Cable.covariate`) | c | 1/(c s) |
+    | `c_rate`, `c_abs_rate` | dc/dt, abs(dc/dt) | c/s | 1/c |
+    | `sigma_c` | sigma c | Pa c | 1/(Pa c s) |
+    | `sigma_c_abs_rate` | sigma abs(dc/dt) (mechano-sorptive creep) | Pa c/s | 1/(Pa c) |
+
+    where c is in the unit of the recorded covariate column (the fit sets
+    `Cable.covariate` per sample from `jaxcable.fit(..., covariate=NAME)`). Over a
+    step the terms are integrated as [`term_increments`][] says (rates exactly,
+    others by the trapezoid rule); time under load is the base's continuous tension
+    clock (`jaxcable._models.kernels.tension_time_step`). Theta `k` belongs to
+    `terms[k]`; the thetas beyond `len(terms)` are unused, stay 0 and are not
+    fitted (fit only `used_fields()`). All thetas 0 is the base exactly.
+
+    **Continuity.** The increment is linear in the thetas and Lipschitz in the force
+    and covariate samples, except that the absolute-rate terms (`sigma_abs_rate`,
+    `c_abs_rate`, `sigma_c_abs_rate`) and `cycles` accumulate the total variation of
+    their signal: noise on it adds theta x its total variation. The discovery keeps
+    such a term only when it predicts held-out data.
+
+    **Fields:**
+
+    - `base`: the wrapped model.
+    - `theta0` .. `theta3`: the coefficients, 1/s per unit of phi (either sign).
+    - `terms`: the term ids, at most four, static.
+
+    `wrap(base)` gives all thetas 0 and no terms (the base); the discovery builds
+    the instance to fit (`jaxcable.discover`).
+    """
+
+    EXTENSION_ID: ClassVar[str] = "discovered"
+    EFFECT_FIELDS: ClassVar[tuple[str, ...]] = THETA_FIELDS
+    SIZE_FIELD: ClassVar[str] = "theta0"
+    SIZE_UNIT: ClassVar[str] = "1/s per unit of phi"
+    FIT_INFO: ClassVar[dict[str, tuple]] = {
+        name: ("linear", "1/s per unit of phi") for name in THETA_FIELDS
+    }
+
+    base: AbstractCableModel
+    theta0: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.0)
+    theta1: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.0)
+    theta2: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.0)
+    theta3: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.0)
+    terms: tuple[str, ...] = eqx.field(static=True, default=())
+
+    def __check_init__(self):
+        terms = self.terms
+        if not isinstance(terms, tuple) or len(terms) > MAX_TERMS:
+            raise ValueError(
+                f"DiscoveredTerm `terms` must be a tuple of at most {MAX_TERMS} term "
+                f"ids, got {terms!r}."
+            )
+        unknown = [t for t in terms if t not in TERMS]
+        if unknown or len(set(terms)) != len(terms):
+            raise ValueError(
+                f"DiscoveredTerm `terms` {terms!r}: each must be one of "
+                f"{list(TERMS)}, without repeats."
+            )
+        for name in THETA_FIELDS:
+            value = getattr(self, name)
+            if _checks.is_concrete(value) and not bool(jnp.all(jnp.isfinite(value))):
+                raise ValueError(f"DiscoveredTerm `{name}` must be finite.")
+
+    @classmethod
+    def wrap(cls, base: AbstractCableModel) -> "DiscoveredTerm":
+        """`base` with no term (all thetas 0): the base itself."""
+        return cls(base)
+
+    def used_fields(self) -> tuple[str, ...]:
+        """The theta fields of the terms in use, `theta0`, ... (the ones to fit)."""
+        return THETA_FIELDS[: len(self.terms)]
+
+    def init(self, cable: Cable) -> DiscoveredTermState:
+        zero = state_zero(cable, *(getattr(self, n) for n in THETA_FIELDS))
+        return DiscoveredTermState(
+            self.base.init(cable), jnp.array(False), *([zero] * 7)
+        )
+
+    def check(self, cable: Cable) -> RESULTS:
+        ok = jnp.all(jnp.isfinite(jnp.stack([getattr(self, n) for n in THETA_FIELDS])))
+        return _checks.domain_result(ok, self.base.check(cable))
+
+    def advance(
+        self,
+        state: DiscoveredTermState,
+        cable: Cable,
+        dt: Float[Array, ""],
+        force: Float[Array, ""],
+        direction: Int[Array, ""],
+    ) -> tuple[DiscoveredTermState, StrainParts]:
+        base_state, parts = self.base.advance(state.base, cable, dt, force, direction)
+        area = cable.area
+        covariate = jnp.asarray(cable.covariate, state.covariate.dtype)
+        # The first step has no previous covariate: no change of it then.
+        c0 = jnp.where(state.started, state.covariate, covariate)
+        force_max = running_max(state.force_max, force)
+        dt_loaded = tension_time_step(state.force, force, dt, cable, force_max)
+        loaded = state.loaded + dt_loaded
+        rest = state.rest + (dt - dt_loaded)
+        variation = state.variation + jnp.abs(force - state.force)
+        increments = term_increments(
+            state.force / area,
+            force / area,
+            c0,
+            covariate,
+            dt,
+            state.loaded,
+            loaded,
+            state.rest,
+            rest,
+            cycle_count(state.variation, state.force_max),
+            cycle_count(variation, force_max),
+        )
+        rate = sum(
+            (getattr(self, THETA_FIELDS[k]) * increments[t])
+            for k, t in enumerate(self.terms)
+        )
+        strain = state.strain + rate
+        new = DiscoveredTermState(
+            base_state,
+            jnp.array(True),
+            force,
+            covariate,
+            force_max,
+            variation,
+            loaded,
+            rest,
+            strain,
+        )
+        return new, add_parts(parts, creep=strain)

@@ -1,0 +1,150 @@
+"""Discovery: DiscoveredTerm (the base at theta = 0, jit/vmap/grad, the covariate
+plumbed through the fit) and `discover` on a hidden mechano-sorptive term and on
+noise alone."""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxcable as jc
+
+from .helpers import finite_difference_grad
+
+
+AREA = float(jc.Cable(length=0.3).area)
+BASE = jc.BurgersModel(E1=2e9, eta0=2e13, E2=6e9, eta2=6e10)
+TERM = "sigma_c_abs_rate"
+# Mechano-sorptive creep: 1/(Pa %RH); 100 N, 20 %RH/cycle -> ~3e-3 strain a cycle.
+THETA = 2e-13
+BASE_FIT = ("E1", "E2")
+
+
+def _history(seed: int, samples: int = 150):
+    """A load-hold-unload history with a humidity swing, and its cable."""
+    rng = np.random.default_rng(seed)
+    time = np.linspace(0.0, 3000.0, samples)
+    # Loaded throughout, cycling; the humidity swings at another period.
+    force = 100.0 * (1 + 0.3 * seed) * (0.6 - 0.4 * np.cos(2 * np.pi * time / 500.0))
+    force = np.clip(force + 0.2 * rng.normal(size=samples), 0.0, None)
+    # Humidity steps (flat, ramps up and down): the mechano-sorptive creep runs
+    # only while it changes, unlike any function of the load or of c itself.
+    knots = np.array([0, 600, 900, 1500, 1800, 2300, 2600, 3000]) + 50 * seed
+    humidity = np.interp(time, knots, [50, 50, 80, 80, 50, 50, 85, 85])
+    return time, force, humidity
+
+
+def _tests(model, seeds=(0, 1, 2), noise=2e-6, covariate=True):
+    """Force-driven tests of `model` with noisy elongations (m) and a humidity
+    column, simulated through the fit's own scan (`jc.residuals` of zero data)."""
+    raw = []
+    for s in seeds:
+        time, force, humidity = _history(s)
+        raw.append(
+            jc.TestData(
+                time=time,
+                force=force,
+                elongation=np.zeros_like(time),
+                extra={"humidity": humidity},
+                metadata={"length_mm": 300.0, "control": "force", "id": f"t{s}"},
+            )
+        )
+    padded = jc.pad_tests(raw, drive="force", covariate="humidity")
+    params, static = eqx.partition(model, eqx.is_inexact_array)
+    clean = np.asarray(jc.residuals(params, static, padded))
+    rng = np.random.default_rng(99)
+    out = []
+    for t, e in zip(raw, clean):
+        e = e[: len(t.time)] + noise * rng.normal(size=len(t.time))
+        extra = t.extra if covariate else {}
+        out.append(jc.TestData(t.time, t.force, e, extra=extra, metadata=t.metadata))
+    return out
+
+
+def test_null_thetas_reproduce_the_base_and_transform_cleanly():
+    time, force, humidity = _history(0)
+    cable = jc.Cable(length=0.3)
+    model = jc.DiscoveredTerm(
+        BASE, terms=("sigma", "sigma_rate", "cycles", "time_loaded")
+    )
+    a = jc.simulate_force_history(BASE, cable, time, force).elongation
+    b = jc.simulate_force_history(model, cable, time, force).elongation
+    np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+
+    tests = _tests(jc.DiscoveredTerm(BASE, theta0=THETA, terms=(TERM,)), seeds=(0,))
+    padded = jc.pad_tests(tests, drive="force", covariate="humidity")
+    true = jc.DiscoveredTerm(BASE, theta0=THETA, terms=(TERM, "sigma"))
+
+    def loss(m):
+        p, s = eqx.partition(m, eqx.is_inexact_array)
+        return jnp.sum(jc.residuals(p, s, padded) ** 2)
+
+    grad = eqx.filter_jit(eqx.filter_grad(loss))(true)
+    fd = finite_difference_grad(loss, true)
+    for name in ("theta0", "theta1"):
+        g, f = float(getattr(grad, name)), float(getattr(fd, name))
+        assert abs(g - f) <= 1e-4 * abs(f) + 1e-30, (name, g, f)
+    # vmap over theta: two models in one call, each as simulated alone.
+    thetas = jnp.array([0.0, THETA])
+    vm = jax.jit(jax.vmap(lambda th: loss(eqx.tree_at(lambda m: m.theta0, true, th))))(
+        thetas
+    )
+    assert np.allclose(vm[1], loss(true), rtol=1e-10) and vm[0] != vm[1]
+
+
+def test_missing_covariate_column_names_the_test():
+    tests = _tests(BASE, seeds=(0,), covariate=False)
+    with pytest.raises(ValueError, match="t0.*humidity"):
+        jc.pad_tests(tests, covariate="humidity")
+
+
+@pytest.fixture(scope="module")
+def hidden():
+    true = jc.DiscoveredTerm(BASE, theta0=THETA, terms=(TERM,))
+    tests = _tests(true)
+    base_fit = jc.fit(BASE, _train(tests), fit=BASE_FIT, drive="force", multistart=1)
+    return true, tests, base_fit
+
+
+def _train(tests, holdout=0.3):
+    from jaxcable._diagnose.heldout import time_split
+
+    return time_split(tests, holdout)[0]
+
+
+@pytest.mark.xfail(
+    reason="open: the base fit absorbs the hidden term and a steadier library term "
+    "(sigma_abs_rate) wins the held-out choice; see the h-discover report",
+    strict=False,
+)
+def test_discover_finds_a_hidden_mechano_sorptive_term(hidden):
+    true, tests, base_fit = hidden
+    found = jc.discover(base_fit, tests, covariate="humidity")
+    assert found.terms[0] == TERM, found.path
+    k = found.terms.index(TERM)
+    assert abs(found.values[k] - THETA) <= 3 * found.stderr[k], found.equation
+    assert "humidity" in found.equation and "1/(Pa [humidity])" in found.equation
+    # The data-generating model's held-out gain over the fitted base.
+    base_rmse, rmse = found.heldout_rmse_mm
+    held = [np.arange(len(t.time)) >= round(0.7 * len(t.time)) for t in tests]
+    true_rmse = _rmse(true, tests, held)
+    true_gain = 1 - true_rmse / base_rmse
+    assert found.gain_pct / 100 >= 0.5 * true_gain, (found.gain_pct, true_gain)
+
+
+def _rmse(model, tests, held):
+    response = jc.model_responses(model, tests, drive="force", covariate="humidity")
+    sq = sum(
+        float(np.sum((r - t.elongation)[h] ** 2))
+        for r, t, h in zip(response, tests, held)
+    )
+    return 1e3 * np.sqrt(sq / sum(int(h.sum()) for h in held))
+
+
+def test_discover_finds_nothing_in_noise():
+    tests = _tests(BASE)
+    base_fit = jc.fit(BASE, _train(tests), fit=BASE_FIT, drive="force", multistart=1)
+    found = jc.discover(base_fit, tests, covariate="humidity")
+    assert found.terms == () or abs(found.gain_pct) < 5, found.path
+    assert found.fit is None or found.gain_pct < 5
