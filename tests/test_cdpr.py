@@ -1,3 +1,4 @@
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -132,32 +133,47 @@ def test_integrated_compensation_removes_80_percent_short():
     )
 
 
+# The scenario of the two gradient tests below: one length, so that the jitted loss
+# and gradient (`cdpr.loss_and_grad`) compile once for both.
+TRAIN = cdpr.pick_and_place(5 / 60)
+
+
 @pytest.mark.slow
 def test_closed_loop_gradient_matches_finite_differences():
-    sc = cdpr.pick_and_place(3 / 60)
+    sc = TRAIN
+    # `loss_and_grad` is `jax.value_and_grad(position_loss)`, jitted: the gradient
+    # and the finite differences come from one compiled program (also the one
+    # test_tune_gain_lowers_the_error uses), not a gradient and a loss compiled apart.
+    _, grad = cdpr.loss_and_grad(1.0, ROBOT, sc, REAL, cdpr.NOMINAL)
+    grad = float(grad)
+    h = 1e-5
 
     def loss(gain):
-        return cdpr.position_loss(gain, ROBOT, sc, REAL, cdpr.NOMINAL)
+        return cdpr.loss_and_grad(gain, ROBOT, sc, REAL, cdpr.NOMINAL)[0]
 
-    grad = float(jax.grad(loss)(1.0))
-    h = 1e-5
     fd = (float(loss(1.0 + h)) - float(loss(1.0 - h))) / (2 * h)
     assert grad != 0.0
     np.testing.assert_allclose(grad, fd, rtol=1e-6)
 
     # And with respect to a parameter of the controller's model (the dashpot).
-    def loss_eta0(log_scale):
-        model = jc.IntegratedModel(eta0=cdpr.NOMINAL.eta0 * jnp.exp(log_scale))
-        return cdpr.position_loss(1.0, ROBOT, sc, REAL, model)
+    @eqx.filter_jit
+    def loss_and_slope_eta0(log_scale, sc):
+        def loss_eta0(log_scale):
+            model = jc.IntegratedModel(eta0=cdpr.NOMINAL.eta0 * jnp.exp(log_scale))
+            return cdpr.position_loss(1.0, ROBOT, sc, REAL, model)
 
-    grad = float(jax.grad(loss_eta0)(0.0))
-    fd = (float(loss_eta0(h)) - float(loss_eta0(-h))) / (2 * h)
+        return jax.value_and_grad(loss_eta0)(log_scale)
+
+    grad = float(loss_and_slope_eta0(jnp.asarray(0.0), sc)[1])
+    plus = float(loss_and_slope_eta0(jnp.asarray(h), sc)[0])
+    minus = float(loss_and_slope_eta0(jnp.asarray(-h), sc)[0])
+    fd = (plus - minus) / (2 * h)
     np.testing.assert_allclose(grad, fd, rtol=1e-6)
 
 
 @pytest.mark.slow
 def test_tune_gain_lowers_the_error():
-    sc = cdpr.pick_and_place(5 / 60)
+    sc = TRAIN
     gain, history = cdpr.tune_gain(ROBOT, sc, REAL, cdpr.NOMINAL, jnp.ones(8))
     assert gain.shape == (8,)
     assert history[-1]["rms_mm"] < 0.9 * history[0]["rms_mm"]
