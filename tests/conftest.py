@@ -83,6 +83,8 @@ SLOW_FIRST = (
     "tests/test_diagnose.py",  # 190 s
     "tests/test_papers.py::test_calibrate_runs_and_does_not_worsen",  # 121 s
     "tests/test_jax_contract.py",  # 200 s before its gradient tests were jitted
+    "tests/test_diagnose_drive.py",  # about 100 s
+    "tests/test_drive.py",  # about 60 s
     "tests/test_fit.py",  # 115 s
     "tests/test_notebooks.py::test_notebook_runs[05_cdpr.ipynb]",  # 75 s
     "tests/test_cdpr.py",  # 187 s before its gradient tests shared a compilation
@@ -91,7 +93,8 @@ SLOW_FIRST = (
     "tests/test_round_trip.py",  # 48 s
     "tests/test_montecarlo.py",  # 43 s
     "tests/test_distributed.py",  # three processes: 38 s
-    "tests/test_notebooks.py::test_notebook_runs[02_fit.ipynb]",  # 28 s
+    "tests/test_notebooks.py::test_notebook_runs[02_fit.ipynb]",  # 55 s
+    "tests/test_discover.py",  # about 40 s
     "tests/test_notebooks.py::test_notebook_runs[01_papers.ipynb]",  # 24 s
     "tests/test_five_element.py",  # 25 s
     "tests/test_long_histories.py",
