@@ -113,12 +113,6 @@ def _train(tests, holdout=0.3):
     return time_split(tests, holdout)[0]
 
 
-@pytest.mark.xfail(
-    reason="open (issue 12): the base fit absorbs the hidden term and a steadier "
-    "library term (sigma_abs_rate) wins the held-out choice. Strict: this test fails "
-    "the suite once discovery finds the term, so that the mark is removed.",
-    strict=True,
-)
 def test_discover_finds_a_hidden_mechano_sorptive_term(hidden):
     true, tests, base_fit = hidden
     found = jc.discover(base_fit, tests, covariate="humidity")

@@ -1,6 +1,6 @@
-"""Discovery of a term the base model lacks: sparse regression of the rate of the
-base's strain residual on a library of terms ([`jaxcable.DiscoveredTerm`][]), the
-sparsity chosen on held-out samples, then a joint Levenberg-Marquardt fit of the
+"""Discovery of a term the base model lacks: sparse regression of the base's strain
+residual on a library of integrated terms ([`jaxcable.DiscoveredTerm`][]) and the
+base's own parameter sensitivities, the sparsity chosen on held-out samples, then a joint Levenberg-Marquardt fit of the
 base with the chosen terms, reported as an equation with units.
 
 Discovery runs on force-driven tests (the model driven by the measured force, the
@@ -15,9 +15,16 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from scipy.ndimage import uniform_filter1d
 
-from .._fit import FitResult, as_test_list, fit, model_responses, test_id
+from .._fit import (
+    FitResult,
+    as_test_list,
+    fit,
+    make_problem,
+    model_responses,
+    residuals_and_jacobian,
+    test_id,
+)
 from .._models import AbstractCableModel, discovered
 from .heldout import heldout_start, with_mask
 
@@ -134,39 +141,6 @@ def library(test, covariate: str | None, names=tuple(TERMS)) -> dict[str, np.nda
     return {k: np.cumsum(np.asarray(increments[k], float)) for k in names}
 
 
-def stlsq(x: np.ndarray, y: np.ndarray, threshold: float, max_iter: int = 10):
-    """Sequentially thresholded least squares on normalised columns: least squares,
-    zero every coefficient whose normalised size |theta_k| ||x_k|| / ||y|| is below
-    `threshold`, refit on the rest, until the support is stable.
-
-    **Returns:**
-
-    The coefficients (in the units of `x`'s columns), zero off the support.
-    """
-    norms = np.linalg.norm(x, axis=0)
-    norms = np.where(norms > 0, norms, 1.0)
-    xn = x / norms
-    scale = max(float(np.linalg.norm(y)), 1e-300)
-    support = np.ones(x.shape[1], bool)
-    coef = np.zeros(x.shape[1])
-    for _ in range(max_iter):
-        coef = np.zeros(x.shape[1])
-        if support.any():
-            coef[support] = np.linalg.lstsq(xn[:, support], y, rcond=None)[0]
-        keep = np.abs(coef) / scale >= threshold
-        if np.array_equal(keep, support):
-            break
-        support = keep & support
-    coef[~support] = 0.0
-    return coef / norms
-
-
-def _smooth_rate(x: np.ndarray, width: int) -> np.ndarray:
-    """Increments of a moving average of `x` (the first one from 0)."""
-    smooth = uniform_filter1d(x, width, mode="nearest") if width > 1 else x
-    return np.diff(smooth, prepend=0.0)
-
-
 def _base_start(base_fit: FitResult) -> AbstractCableModel:
     """The fitted base as a start model (per-test values averaged to scalars)."""
     return jax.tree_util.tree_map(
@@ -186,6 +160,23 @@ def _equation(terms, values, stderr, covariate) -> str:
     return "d(eps)/dt = " + (" + ".join(parts) if parts else "0")
 
 
+def _sensitivities(base, base_fit: FitResult, tests) -> list[np.ndarray]:
+    """d(model elongation)/du of the base's fitted parameters at its fit (u: the
+    fit's unconstrained parameters, log for the positive ones), m, one
+    `(samples, p)` array per test, every sample."""
+    names = list(dict.fromkeys(n.split("[")[0] for n in base_fit.names))
+    full = [
+        dataclasses.replace(
+            t, mask=None, elongation=np.nan_to_num(np.asarray(t.elongation, float))
+        )
+        for t in tests
+    ]
+    problem, u = make_problem(base, full, names, None, None, "force")
+    _, jacobian = residuals_and_jacobian(problem, u, "fwd")
+    jacobian = np.asarray(jacobian).reshape(len(full), -1, u.shape[0])
+    return [jacobian[i, : len(t.time)] for i, t in enumerate(full)]
+
+
 def _heldout_rmse_mm(model, tests, held, covariate) -> float:
     response = model_responses(model, tests, drive="force", covariate=covariate)
     sq = sum(
@@ -203,7 +194,6 @@ def discover(
     holdout: float = 0.3,
     held=None,
     terms=None,
-    smoothing: int | None = None,
     min_gain_pct: float = MIN_GAIN_PCT,
     joint_fit: bool = True,
     **fit_kwargs,
@@ -212,17 +202,17 @@ def discover(
     of a fitted base model, and fit them jointly with the base.
 
     1. The residual strain r = (measured - model) / L0 of `base_fit`'s model along
-        every force-driven test, and each term's strain per unit theta eps_k (see
-        [`library`][]), both smoothed by one moving average and differenced: the
-        rate of the residual and of each term, per step.
-    2. Sequentially thresholded least squares (normalised columns, [`stlsq`][]) of
-        the residual's rate on the terms' rates over the training samples, for
-        thresholds from 0 to above the largest normalised coefficient; every
-        support of at most four terms is refitted by least squares.
-    3. Each support's predicted residual sum_k theta_k eps_k (integrated from each
-        test's start) is scored on the held-out samples; the support of least
-        held-out RMSE is chosen if it beats no term by `min_gain_pct` (else none),
-        and of near-equal ones (within 1 %) the fewest terms.
+        every force-driven test; each library term's strain per unit theta eps_k
+        (see [`library`][]); and the sensitivity of the model's strain to each of
+        the base's fitted parameters (its Jacobian at the fit).
+    2. Forward selection of at most four terms: each support is the least-squares
+        fit of r on its terms' strains AND every base sensitivity over the training
+        samples (the base's parameters move with every candidate support, so that a
+        term the base can mimic by refitting is not chosen), scored by the RMSE of
+        what it leaves on the held-out samples.
+    3. The support of least held-out RMSE is chosen if it beats no term (the base
+        refitted to first order) by `min_gain_pct` (else none), and of near-equal
+        ones (within 1 %) the fewest terms.
     4. `DiscoveredTerm(base, theta, terms)` is fitted by [`jaxcable.fit`][]
         (`drive="force"`, the base's fitted parameters and the chosen thetas) on the
         training samples, and scored on the held-out ones.
@@ -240,8 +230,6 @@ def discover(
     - `held`: one boolean array per test, True where a sample is held out.
     - `terms`: the library to search (default all of `TERMS`, less the covariate
         terms without a covariate).
-    - `smoothing`: the moving-average width in samples (default ~1/50 of the
-        longest test, odd, at least 3).
     - `min_gain_pct`: the held-out gain over no term a support needs, percent.
     - `joint_fit`: fit the chosen terms with the base (default True).
     - `fit_kwargs`: passed on to [`jaxcable.fit`][] (e.g. `multistart`).
@@ -290,10 +278,9 @@ def discover(
 
     base = _base_start(base_fit)
     response = model_responses(base, tests, drive="force")
-    longest = max(len(t.time) for t in tests)
-    width = smoothing or max(3, (longest // 50) | 1)
-    rows_x, rows_y, per_test = [], [], []
-    for t, m, h in zip(tests, response, held):
+    sensitivity = _sensitivities(base, base_fit, tests)
+    rows = []
+    for t, m, h, sens in zip(tests, response, held, sensitivity):
         length = float(t.cable().length)
         measured = np.asarray(t.elongation, float)
         own = getattr(t, "mask", None)
@@ -302,55 +289,52 @@ def discover(
         r = np.where(valid, (measured - m) / length, 0.0)
         lib = library(t, covariate, names)
         cum = np.stack([lib[k] for k in names], axis=1)
-        rate_x = np.stack(
-            [_smooth_rate(cum[:, k], width) for k in range(len(names))], 1
-        )
-        rate_y = _smooth_rate(r, width)
-        # A step is trained on when it and its predecessor are training samples.
-        train = valid & ~h & np.r_[True, (valid & ~h)[:-1]]
-        rows_x.append(rate_x[train])
-        rows_y.append(rate_y[train])
-        per_test.append((r, cum, valid & h, length))
-    x, y = np.concatenate(rows_x), np.concatenate(rows_y)
+        rows.append((r, cum, sens / length, valid & ~h, valid & h, length))
 
-    def score(coef) -> float:
+    def solve(columns: list[int]) -> tuple[np.ndarray, np.ndarray]:
+        """Least squares of the training residual on the chosen terms' strains and
+        every base sensitivity: (theta per term of `names`, base parameter step)."""
+        x = np.concatenate(
+            [
+                np.concatenate([c[tr][:, columns], s[tr]], 1)
+                for _, c, s, tr, _, _ in rows
+            ]
+        )
+        y = np.concatenate([r[tr] for r, _, _, tr, _, _ in rows])
+        norms = np.linalg.norm(x, axis=0)
+        norms = np.where(norms > 0, norms, 1.0)
+        z = np.linalg.lstsq(x / norms, y, rcond=None)[0] / norms
+        theta = np.zeros(len(names))
+        theta[columns] = z[: len(columns)]
+        return theta, z[len(columns) :]
+
+    def score(theta, step) -> float:
         sq, n = 0.0, 0
-        for r, cum, h, length in per_test:
-            sq += float(np.sum(((r - cum @ coef) * length)[h] ** 2))
+        for r, cum, sens, _, h, length in rows:
+            sq += float(np.sum(((r - cum @ theta - sens @ step) * length)[h] ** 2))
             n += int(h.sum())
         return 1e3 * math.sqrt(sq / max(n, 1))
 
-    full = stlsq(x, y, 0.0)
-    sizes = np.abs(full) * np.linalg.norm(x, axis=0) / max(np.linalg.norm(y), 1e-300)
-    top = max(float(sizes.max()), 1e-3)
-    thresholds = np.unique(
-        np.r_[0.0, sizes * (1 + 1e-9), np.geomspace(1e-4 * top, top, 60)]
-    )
-    path = {(): (np.zeros(len(names)), score(np.zeros(len(names))))}
-    for threshold in thresholds:
-        coef = stlsq(x, y, float(threshold))
-        support = tuple(names[k] for k in np.flatnonzero(coef))
-        if len(support) <= MAX_TERMS and support not in path:
-            path[support] = (coef, score(coef))
-    # Forward selection adds supports the thresholds skip when the library's
-    # columns are collinear (the full least squares then cancels large terms).
+    # Forward selection, each support scored on the held-out samples. The base's
+    # own parameters move with every support (their sensitivities are columns of
+    # every fit): a term the base can mimic by refitting is not a discovery.
+    empty = solve([])
+    path = {(): (empty[0], score(*empty))}
     support: list[int] = []
     for _ in range(min(MAX_TERMS, len(names))):
         trials = []
         for k in range(len(names)):
             if k in support:
                 continue
-            coef = np.zeros(len(names))
-            cols = [*support, k]
-            coef[cols] = np.linalg.lstsq(x[:, cols], y, rcond=None)[0]
-            trials.append((score(coef), k, coef))
-        value, k, coef = min(trials, key=lambda v: v[0])
+            theta, step = solve([*support, k])
+            trials.append((score(theta, step), k, theta))
+        value, k, theta = min(trials, key=lambda v: v[0])
         support.append(k)
         key = tuple(names[j] for j in sorted(support))
-        path.setdefault(key, (coef, value))
-    empty = path[()][1]
+        path.setdefault(key, (theta, value))
+    empty_score = path[()][1]
     best = min(path, key=lambda s: path[s][1])
-    if path[best][1] > (1 - min_gain_pct / 100) * empty:
+    if path[best][1] > (1 - min_gain_pct / 100) * empty_score:
         best = ()
     else:
         near = [s for s in path if path[s][1] <= 1.01 * path[best][1]]

@@ -6,7 +6,12 @@ from .data import (
     test_id as test_id,
 )
 from .fit import fit as fit
-from .problem import make_loss as make_loss, residuals as residuals
+from .problem import (
+    make_loss as make_loss,
+    make_problem as make_problem,
+    residuals as residuals,
+)
 from .responses import model_responses as model_responses
 from .result import FitResult as FitResult
+from .solver import residuals_and_jacobian as residuals_and_jacobian
 from .statistics import IdentifiabilityWarning as IdentifiabilityWarning
