@@ -6,6 +6,11 @@ process with the same shapes loads them instead of compiling. The library never 
 it on by itself (importing jaxcable leaves `jax.config` alone); the command line turns
 it on for every command, and a script or notebook can with
 [`jaxcable.enable_compilation_cache`][].
+
+The compilation cache saves compiling, not tracing and lowering the program, which
+is about as long for the fit kernel: the command line also keeps each fit kernel it
+runs as an exported program (`jax.export`) in `exported/` inside the same directory
+([`exported_programs_dir`][]), turned off and cleared with the rest.
 """
 
 import os
@@ -29,6 +34,15 @@ def default_cache_dir() -> pathlib.Path:
         return pathlib.Path(explicit).expanduser()
     base = os.environ.get("XDG_CACHE_HOME") or pathlib.Path.home() / ".cache"
     return pathlib.Path(base) / "jaxcable" / "jax"
+
+
+def exported_programs_dir() -> pathlib.Path | None:
+    """Where the command line keeps its exported fit programs (traced and lowered,
+    see `jaxcable._fit.exported`): `exported/` in [`default_cache_dir`][], cleared
+    with it; `None` when `$JAXCABLE_NO_CACHE` turns the cache off."""
+    if cache_disabled():
+        return None
+    return default_cache_dir() / "exported"
 
 
 def cache_disabled() -> bool:

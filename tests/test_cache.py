@@ -3,10 +3,12 @@ loads from it, `jaxcable cache --clear` empties it, and nothing is cached unless
 asked for (the library leaves jax.config alone)."""
 
 import os
+import pathlib
 import subprocess
 import sys
 
 import jax
+import numpy as np
 import pytest
 
 import jaxcable as jc
@@ -103,3 +105,94 @@ def test_importing_jaxcable_leaves_the_cache_off(tmp_path):
     suite = os.environ.get("JAXCABLE_TEST_JAX_CACHE", "off")
     expected = None if suite == "off" else suite
     assert (jax.config.jax_compilation_cache_dir or None) == expected
+
+
+_FIT = """
+import sys
+from jaxcable._cli import main
+sys.exit(main({argv!r}))
+"""
+
+
+def _fit_argv(out):
+    data = sorted(
+        str(p) for p in (pathlib.Path(jc.__file__).parent / "data").glob("*.csv")
+    )
+    return [
+        "fit", *data[:2], "--model", "burgers", "--every", "20", "--starts", "2",
+        "--max-steps", "30", "--out", str(out), "--quiet",
+    ]  # fmt: skip
+
+
+def test_warm_fit_loads_the_exported_kernel_and_writes_the_same_params(tmp_path):
+    """A second process loads the fit kernel exported by the first (no tracing), and
+    its PARAMS.json is byte for byte the first's and the uncached library fit's."""
+    pytest.importorskip("flatbuffers")
+    # A short fit (30 steps): converged or not (exit status 1), PARAMS.json is
+    # written, and it is the program's output that is compared.
+    env = _cli_env(tmp_path)
+    exported = tmp_path / "cache" / "exported"
+    cold = _run(_FIT.format(argv=_fit_argv(tmp_path / "cold.json")), env)
+    assert cold.returncode in (0, 1), cold.stderr
+    programs = sorted(exported.glob("fit-*-cache"))
+    assert len(programs) == 1
+    written = programs[0].stat().st_mtime_ns
+    warm = _run(_FIT.format(argv=_fit_argv(tmp_path / "warm.json")), env)
+    assert warm.returncode in (0, 1), warm.stderr
+    # Read, not exported again.
+    assert sorted(exported.glob("fit-*-cache")) == programs
+    assert programs[0].stat().st_mtime_ns == written
+    cold_json = (tmp_path / "cold.json").read_text(encoding="utf-8")
+    assert (tmp_path / "warm.json").read_text(encoding="utf-8") == cold_json
+    # The library's own kernel (no cache at all), in a fresh process too.
+    off = _cli_env(
+        tmp_path, JAXCABLE_NO_CACHE="1", JAXCABLE_CACHE_DIR=str(tmp_path / "n")
+    )
+    plain = _run(_FIT.format(argv=_fit_argv(tmp_path / "plain.json")), off)
+    assert plain.returncode in (0, 1), plain.stderr
+    assert not (tmp_path / "n").exists()
+    assert (tmp_path / "plain.json").read_text(encoding="utf-8") == cold_json
+
+
+@pytest.mark.filterwarnings("ignore::jaxcable.IdentifiabilityWarning")
+def test_cached_kernels_in_process_match_the_library_fit(tmp_path):
+    """The exported program, written then read back, gives the library fit's result
+    bit for bit; a damaged file is exported again."""
+    pytest.importorskip("flatbuffers")
+    from jaxcable._cli.data import _thin
+    from jaxcable._fit import cached_fit_kernels
+
+    data = sorted((pathlib.Path(jc.__file__).parent / "data").glob("*.csv"))[:2]
+    with jax.enable_x64(True):
+        tests = [jc.read_test(p) for p in data]
+        tests = [_thin(t, 20) for t in tests]
+        kw = dict(multistart=2, max_steps=30, throw=False)
+        plain = jc.fit(jc.BurgersModel(), tests, **kw)
+        results = []
+        for damage in (False, False, True):
+            for p in (tmp_path / "x").glob("fit-*-cache"):
+                if damage:
+                    p.write_bytes(b"not a program")
+            with cached_fit_kernels(tmp_path / "x"):
+                results.append(jc.fit(jc.BurgersModel(), tests, **kw))
+    assert len(list((tmp_path / "x").glob("fit-*-cache"))) == 1
+    for r in results:
+        for name in ("values", "stderr", "start_losses", "rmse_mm"):
+            np.testing.assert_array_equal(getattr(r, name), getattr(plain, name))
+        assert r.loss == plain.loss and r.num_steps == plain.num_steps
+
+
+def test_no_cache_switch_turns_exported_kernels_off_and_clear_takes_them(
+    tmp_path, monkeypatch
+):
+    from jaxcable._cache import exported_programs_dir
+
+    monkeypatch.setenv("JAXCABLE_CACHE_DIR", str(tmp_path / "c"))
+    monkeypatch.setenv("JAXCABLE_NO_CACHE", "1")
+    assert exported_programs_dir() is None
+    monkeypatch.setenv("JAXCABLE_NO_CACHE", "")
+    assert exported_programs_dir() == tmp_path / "c" / "exported"
+    (tmp_path / "c" / "exported").mkdir(parents=True)
+    (tmp_path / "c" / "exported" / "fit-0123-cache").write_bytes(b"z" * 5)
+    assert main(["cache", "--clear"]) == 0
+    assert not (tmp_path / "c").exists()

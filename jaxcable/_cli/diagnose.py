@@ -13,7 +13,13 @@ from .._progress import Progress
 from .._report import DIAGNOSIS_REPORT_FILES, write_diagnosis_report
 from .common import CliError, make_folder, require_folder_of, show_progress
 from .data import data_options, describe_tests, read_tests
-from .fit import input_files, named_files, report_files, test_drives
+from .fit import (
+    exported_kernels,
+    input_files,
+    named_files,
+    report_files,
+    test_drives,
+)
 from .models import resolve_model
 from .outputs import refuse_inputs, say_replacing, write_errors
 
@@ -36,7 +42,8 @@ def run_diagnosis(
 
     The diagnosis.
     """
-    with Progress("diagnosing", enabled=progress):
+    # Every candidate's fits run as programs exported to the cache (see `run_fit`).
+    with Progress("diagnosing", enabled=progress), exported_kernels():
         try:
             return diagnose(
                 tests,

@@ -1,6 +1,7 @@
 """`jaxcable fit`: a model fitted to measured tests, written as PARAMS.json, with a
 summary on stdout and optionally a report folder."""
 
+import contextlib
 import os
 import pathlib
 import warnings
@@ -8,7 +9,14 @@ import warnings
 import jax
 import numpy as np
 
-from .._fit import FitResult, IdentifiabilityWarning, fit, resolve_drives
+from .._cache import exported_programs_dir
+from .._fit import (
+    FitResult,
+    IdentifiabilityWarning,
+    cached_fit_kernels,
+    fit,
+    resolve_drives,
+)
 from .._models import AbstractCableModel
 from .._progress import Progress
 from .._report import FIT_REPORT_FILES, write_report
@@ -42,6 +50,15 @@ def named_files(tests) -> str:
     return ", ".join(names) or "the data"
 
 
+def exported_kernels() -> contextlib.AbstractContextManager:
+    """Within it, fits run their kernel as a program exported to the per-user cache
+    (traced and lowered once, not once per process); a no-op when the cache is off."""
+    directory = exported_programs_dir()
+    if directory is None:
+        return contextlib.nullcontext()
+    return cached_fit_kernels(directory)
+
+
 def run_fit(
     model: AbstractCableModel,
     name: str,
@@ -73,7 +90,11 @@ def run_fit(
     """
     n = sum(int(np.sum(t.mask)) for t in tests)
     label = f"fitting {name} to {len(tests)} test(s), {n} samples"
-    with Progress(label, enabled=progress), warnings.catch_warnings():
+    with (
+        Progress(label, enabled=progress),
+        warnings.catch_warnings(),
+        exported_kernels(),
+    ):
         warnings.simplefilter("ignore", IdentifiabilityWarning)
         try:
             return fit(

@@ -5,6 +5,7 @@ from .data import (
     resolve_drives as resolve_drives,
     test_id as test_id,
 )
+from .exported import cached_fit_kernels as cached_fit_kernels
 from .fit import fit as fit
 from .problem import (
     make_loss as make_loss,

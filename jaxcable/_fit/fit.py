@@ -27,13 +27,14 @@ from .data import (
     as_test_list,
     test_id,
 )
+from .exported import current_fit_kernel
 from .parameters import test_slice
 from .problem import (
     Problem,
     make_problem,
 )
 from .result import FitResult
-from .solver import KernelOut, LevenbergMarquardt, fit_kernel
+from .solver import KernelOut, LevenbergMarquardt
 from .statistics import (
     IdentifiabilityWarning,
     Statistics,
@@ -295,7 +296,9 @@ def fit(
     if key is None:
         key = jr.key(0)
     jac = "fwd" if p <= n else "bwd"
-    out = fit_kernel(problem, u_user, key, solver, max_steps, jac, multistart, spread)
+    # `fit_kernel`, or the command line's exported programs (`cached_fit_kernels`).
+    kernel = current_fit_kernel()
+    out = kernel(problem, u_user, key, solver, max_steps, jac, multistart, spread)
     _require_valid_start(out, test_list, problem)
     converged, message, ssr, stats = _outcome(out, layout.labels, n, throw)
     for text in stats.warnings:
