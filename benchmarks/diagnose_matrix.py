@@ -4,11 +4,15 @@ For each hidden effect (and for none), `--seeds` data sets of
 `jaxcable.papers.hidden_effect_dataset` (six tests: three lengths, two rates, three force
 levels, three temperatures; 5 um elongation and 0.05 N force noise; the base
 parameters perturbed by 10 % per seed) are diagnosed at the effect's documented size;
-the named causes make the confusion matrix. With `--sweep`, each effect is also run at
+the named causes make the confusion matrix (its `unexplained` column: an excess over
+the noise that no candidate explains enough to be named, see
+`jaxcable._diagnose.verdict`). With `--sweep`, each effect is also run at
 its weaker sizes (`HIDDEN_EFFECTS[effect]["weaker"]`), and its detection limit is the
 weakest size named in >= 9 of 10 seeds. For every run the held-out RMSE of the named
 model is compared with the floor: the held-out RMSE of the data-generating model
-itself (elongation noise plus its response to the force noise). Prints JSON (one
+itself (elongation noise plus its response to the force noise); every row also records
+the noise estimated from the data (`Diagnosis.noise`), the verdict, and each
+candidate's share of the base's excess over that noise (`explained_pct`). Prints JSON (one
 object) and a table; `--out FILE` writes the JSON too.
 
     python benchmarks/diagnose_matrix.py --seeds 10 --sweep --out matrix.json
@@ -68,12 +72,15 @@ def run(effect, seed, size):
         "size": size,
         "documented": effect is None or size == HIDDEN_EFFECTS[effect]["size"],
         "named": d.named_cause,
+        "verdict": d.verdict,
+        "noise_um": 1e3 * d.noise_mm,
         "floor_um": 1e3 * floor,
         "effect_rms_um": rms_um,
         "effect_max_um": max_um,
         "base_heldout_um": 1e3 * d.base_heldout_rmse_mm,
         "extended_heldout_um": 1e3 * d.extended_heldout_rmse_mm,
         "gains": {c.id: c.gain_pct for c in d.candidates},
+        "explained_pct": {c.id: c.explained_pct for c in d.candidates},
         "effect_value": d.effect.get("value"),
         "effect_stderr": d.effect.get("stderr"),
     }
@@ -126,7 +133,7 @@ def main(argv=None):
                     file=sys.stderr,
                     flush=True,
                 )
-    names = ["none", *jc.EXTENSIONS]
+    names = ["none", *jc.EXTENSIONS, "unexplained"]
     matrix = {
         e: {n: 0 for n in names}
         for e in (["none"] if None in effects else []) + [e for e in effects if e]
@@ -200,7 +207,11 @@ def main(argv=None):
     if args.markdown:
         with open(args.markdown, "w") as f:
             f.write(_markdown(matrix, limits, names, document))
-    short = {"none": "none", **{k: k[:8] for k in jc.EXTENSIONS}}
+    short = {
+        "none": "none",
+        **{k: k[:8] for k in jc.EXTENSIONS},
+        "unexplained": "unexplai",
+    }
     print("\nhidden \\ named  " + " ".join(f"{short[n]:>8s}" for n in names))
     for effect, counts in matrix.items():
         print(
