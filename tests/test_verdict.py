@@ -11,6 +11,7 @@ import pytest
 import jaxcable as jc
 from jaxcable._diagnose import (
     MAX_FLOOR_RATIO,
+    MIN_AUTOCORRELATION,
     MIN_EXCESS,
     MIN_EXPLAINED_PCT,
     Candidate,
@@ -76,8 +77,14 @@ def test_partial_fix_is_unexplained():
     v = decide(base, floor, [cand, 0.99 * base], [True, False])
     assert v.verdict == "unexplained" and v.named is None
     assert v.explained_pct[0] == pytest.approx(share)
-    # No significant candidate at all, an excess: unexplained too.
-    assert decide(base, floor, [0.99 * base], [False]).verdict == "unexplained"
+    # No significant candidate at all, a systematic excess: unexplained too...
+    v = decide(base, floor, [0.99 * base], [False], MIN_AUTOCORRELATION)
+    assert v.verdict == "unexplained"
+    # ... but a white one is noise the estimate missed: none.
+    v = decide(1.3 * floor, floor, [1.29], [False], 0.9 * MIN_AUTOCORRELATION)
+    assert v.verdict == "none"
+    # A significant partial candidate is unexplained whatever the autocorrelation.
+    assert decide(base, floor, [cand], [True], 0.0).verdict == "unexplained"
 
 
 def test_the_best_sufficient_candidate_is_named():

@@ -25,6 +25,7 @@ from .structure import (
 )
 from .verdict import (
     MAX_FLOOR_RATIO as MAX_FLOOR_RATIO,
+    MIN_AUTOCORRELATION as MIN_AUTOCORRELATION,
     MIN_EXPLAINED_PCT as MIN_EXPLAINED_PCT,
     Verdict as Verdict,
     decide as decide,

@@ -353,6 +353,7 @@ def diagnose(
         noise,
         [c.heldout_rmse for c in out],
         [c.significant for c in out],
+        structure["autocorrelation"],
     )
     out = [
         dataclasses.replace(c, explained_pct=share)

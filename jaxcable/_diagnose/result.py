@@ -11,7 +11,12 @@ import numpy as np
 
 from .._files import write_text_atomic
 from .._fit import FitResult
-from .verdict import MAX_FLOOR_RATIO, MIN_EXCESS, MIN_EXPLAINED_PCT
+from .verdict import (
+    MAX_FLOOR_RATIO,
+    MIN_AUTOCORRELATION,
+    MIN_EXCESS,
+    MIN_EXPLAINED_PCT,
+)
 
 
 # Significance thresholds of a candidate (see `jaxcable.diagnose`).
@@ -225,6 +230,7 @@ class Diagnosis:
                 "min_excess_over_noise": MIN_EXCESS,
                 "max_heldout_over_noise": MAX_FLOOR_RATIO,
                 "min_explained_pct": MIN_EXPLAINED_PCT,
+                "min_autocorrelation_unexplained": MIN_AUTOCORRELATION,
             },
             "candidates": [c.to_dict() for c in self.candidates],
             "structure": _jsonable(self.structure),
@@ -327,7 +333,9 @@ class Diagnosis:
             lines = [
                 "verdict: none — no candidate improves the held-out RMSE "
                 f"significantly: gain >= {MIN_GAIN_PCT:g} %, dBIC <= "
-                f"{MAX_DELTA_BIC:g}, size >= {MIN_SIZE_Z:g} standard errors"
+                f"{MAX_DELTA_BIC:g}, size >= {MIN_SIZE_Z:g} standard errors; and "
+                f"the residual left is not systematic (lag-1 autocorrelation "
+                f"{r_lag:.2f} < {MIN_AUTOCORRELATION:g})"
             ]
         else:
             e = self.effect

@@ -11,7 +11,12 @@ Three outcomes:
   `MIN_EXPLAINED_PCT` = S % of the base's held-out excess over the floor. Among those,
   the one of largest held-out gain is named.
 - `"unexplained"`: the base's excess is significant but no candidate is both: the
-  partial candidates are listed with the share of the excess each explains.
+  partial candidates are listed with the share of the excess each explains. When no
+  candidate is even significant, the excess must also be systematic: the base
+  residual's lag-1 autocorrelation at least `MIN_AUTOCORRELATION` (0.5); a white
+  residual above the estimated noise is noise the estimate missed (the second
+  differences miss the model's response to the force noise it is driven with, e.g.
+  a Burgers truth scored in N at 1.3 x the estimate), so the verdict is `"none"`.
 
 The excess is measured in squares, in the scored units: the base's held-out mean
 square minus the floor's. A candidate's explained share is
@@ -45,6 +50,10 @@ MIN_EXCESS = 1.2
 MAX_FLOOR_RATIO = 1.5
 # ... or when it explains at least S % of the base's excess over the floor.
 MIN_EXPLAINED_PCT = 75.0
+# With no significant candidate, an excess is "unexplained" only when systematic: a
+# smooth error s on white noise sigma has lag-1 autocorrelation s^2 / (s^2 + sigma^2),
+# 0.5 where s = sigma (a base at sqrt(2) x the noise).
+MIN_AUTOCORRELATION = 0.5
 
 
 class Verdict(NamedTuple):
@@ -114,6 +123,7 @@ def decide(
     floor: float,
     heldout: Sequence[float],
     significant: Sequence[bool],
+    autocorrelation: float = math.nan,
 ) -> Verdict:
     """The verdict on scored candidates, from numbers alone.
 
@@ -124,13 +134,17 @@ def decide(
     - `heldout`: every candidate's held-out RMSE, same unit (NaN: not applicable).
     - `significant`: whether each passed the three significance tests (gain,
         ΔBIC, size z).
+    - `autocorrelation`: the base residual's lag-1 autocorrelation (NaN: unknown,
+        taken as systematic).
 
     **Returns:**
 
     A [`Verdict`][]: `"none"` when `base` <= `MIN_EXCESS` x `floor` or `floor` is
     not finite (no noise estimate, nothing to weigh the excess against); else
     `"named"` with the significant, sufficient candidate of lowest held-out RMSE
-    (largest gain); else `"unexplained"`.
+    (largest gain); else `"unexplained"`, but `"none"` when no candidate is
+    significant and `autocorrelation` < `MIN_AUTOCORRELATION` (no systematic
+    residual).
     """
     shares = tuple(explained_pct(base, h, floor) for h in heldout)
     if not (math.isfinite(floor) and base > MIN_EXCESS * floor):
@@ -142,4 +156,6 @@ def decide(
     ]
     if able:
         return Verdict("named", min(able, key=lambda i: heldout[i]), shares)
+    if not any(significant) and autocorrelation < MIN_AUTOCORRELATION:
+        return Verdict("none", None, shares)
     return Verdict("unexplained", None, shares)
