@@ -260,7 +260,8 @@ class Diagnosis:
             f"RMSE {self.base_train_rmse:.4g} {u} fitted, "
             f"{self.base_heldout_rmse:.4g} {u} held out",
             "",
-            f"{'candidate':<24}{'held-out ' + u:>{w}}{'gain %':>9}{'dBIC':>10}"
+            f"{'candidate':<24}{'held-out ' + u:>{w}}{'gain %':>9}{'expl %':>8}"
+            f"{'dBIC':>10}"
             f"{'size':>12}{'+-':>10}  unit",
         ]
         for c in self.candidates:
@@ -270,6 +271,7 @@ class Diagnosis:
             mark = " *" if c.significant else ""
             lines.append(
                 f"{c.id:<24}{c.heldout_rmse:>{w}.4g}{c.gain_pct:>9.1f}"
+                f"{c.explained_pct:>8.0f}"
                 f"{c.delta_bic:>10.1f}{c.size:>12.4g}{c.size_stderr:>10.2g}  "
                 f"{c.size_unit}{mark}"
             )
