@@ -4,11 +4,15 @@ For each hidden effect (and for none), `--seeds` data sets of
 `jaxcable.papers.hidden_effect_dataset` (six tests: three lengths, two rates, three force
 levels, three temperatures; 5 um elongation and 0.05 N force noise; the base
 parameters perturbed by 10 % per seed) are diagnosed at the effect's documented size;
-the named causes make the confusion matrix. With `--sweep`, each effect is also run at
+the named causes make the confusion matrix (its `unexplained` column: an excess over
+the noise that no candidate explains enough to be named, see
+`jaxcable._diagnose.verdict`). With `--sweep`, each effect is also run at
 its weaker sizes (`HIDDEN_EFFECTS[effect]["weaker"]`), and its detection limit is the
 weakest size named in >= 9 of 10 seeds. For every run the held-out RMSE of the named
 model is compared with the floor: the held-out RMSE of the data-generating model
-itself (elongation noise plus its response to the force noise). Prints JSON (one
+itself (elongation noise plus its response to the force noise); every row also records
+the noise estimated from the data (`Diagnosis.noise`), the verdict, and each
+candidate's share of the base's excess over that noise (`explained_pct`). Prints JSON (one
 object) and a table; `--out FILE` writes the JSON too.
 
 With `--out-of-catalogue` the effects outside the catalogue
@@ -128,7 +132,8 @@ def run(effect, seed, size):
         "documented": effect is None or size == _spec(effect)[0],
         "outside_catalogue": outside,
         "named": d.named_cause,
-        "verdict": getattr(d, "verdict", None),
+        "verdict": d.verdict,
+        "noise_um": 1e3 * d.noise_mm,
         "wrong_catalogue_cause": bool(
             d.named_cause in jc.EXTENSIONS and d.named_cause != effect
         ),
@@ -148,6 +153,7 @@ def run(effect, seed, size):
             else gains["discovered"] / true_gain
         ),
         "gains": gains,
+        "explained_pct": {c.id: c.explained_pct for c in d.candidates},
         "effect_value": d.effect.get("value"),
         "effect_stderr": d.effect.get("stderr"),
     }

@@ -308,12 +308,14 @@ def build_parser() -> argparse.ArgumentParser:
             "Fit the base model (default: the integrated model) to the measured "
             "tests with the last part of every test held out, analyse its residuals "
             "for structure (time under load, force, loading vs unloading, cycle, "
-            "rest time, length, rate, temperature, autocorrelation), fit every "
+            "rest time, length, rate, temperature and every extra column with its "
+            "rate, autocorrelation), fit every "
             "candidate extension (hereditary, second_retardation, "
             "stress_nonlinear_creep, temperature, termination_compliance, "
             "bedding_in, sensor_drift), score each on the held-out data and by BIC, "
-            "and name the cause: the significant candidate of largest held-out gain, "
-            "or none. Reads files like 'jaxcable fit'. See jaxcable.diagnose."
+            "and give a verdict: named (the significant candidate of largest "
+            "held-out gain that explains the residual), none (nothing to explain) "
+            "or unexplained. Reads files like 'jaxcable fit'. See jaxcable.diagnose."
         ),
     )
     diag.add_argument("data", nargs="+", metavar="DATA.csv", help="the measured tests")
@@ -325,7 +327,8 @@ def build_parser() -> argparse.ArgumentParser:
     diag.add_argument(
         "--json",
         action="store_true",
-        help="print one JSON object on stdout (named_cause, candidates, unit, "
+        help="print one JSON object on stdout (named_cause, verdict, candidates "
+        "with explained_pct, structure, unit, "
         "base_heldout_rmse, extended_heldout_rmse, ... in unit: mm, N or noise; "
         "the *_mm fields in mm when every test is force-driven); the log goes to "
         "stderr",

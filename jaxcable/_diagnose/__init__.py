@@ -19,4 +19,16 @@ from .result import (
     Diagnosis as Diagnosis,
 )
 from .scoring import Scoring as Scoring, noise_floor as noise_floor, scoring as scoring
-from .structure import residual_structure as residual_structure
+from .structure import (
+    covariates as covariates,
+    rate_of_change as rate_of_change,
+    residual_structure as residual_structure,
+)
+from .verdict import (
+    MAX_FLOOR_RATIO as MAX_FLOOR_RATIO,
+    MIN_AUTOCORRELATION as MIN_AUTOCORRELATION,
+    MIN_EXPLAINED_PCT as MIN_EXPLAINED_PCT,
+    Verdict as Verdict,
+    decide as decide,
+    explained_pct as explained_pct,
+)

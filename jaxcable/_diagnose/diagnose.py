@@ -15,10 +15,15 @@ The workflow:
 4. score each by its held-out RMSE (the gain over the base's, %), by the Bayesian
    information criterion on the training parts (ΔBIC against the base), and by the
    evidence that its size parameter is not zero (|size| / standard error);
-5. name the cause: among the candidates significant on all three counts, the one of
-   largest held-out gain; `"none"` when none is.
+5. the verdict (`verdict.py`): `"none"` when the base is within 1.2 x the noise held
+   out (nothing to explain); else `"named"`: among the candidates significant on all
+   three counts that also come within `MAX_FLOOR_RATIO` x the noise held out or
+   explain at least `MIN_EXPLAINED_PCT` % of the base's excess over it, the one of
+   largest held-out gain; else `"unexplained"`, the partial candidates listed with
+   the share of the excess each explains.
 """
 
+import dataclasses
 import math
 import warnings
 from collections.abc import Callable, Sequence
@@ -29,16 +34,10 @@ import numpy as np
 from .._fit import FitResult, IdentifiabilityWarning, as_test_list, fit, test_id
 from .._models import EXTENSIONS, AbstractCableModel, IntegratedModel, identifiable
 from .heldout import Fold, splits, with_mask
-from .result import (
-    MAX_DELTA_BIC,
-    MIN_EXCESS,
-    MIN_GAIN_PCT,
-    MIN_SIZE_Z,
-    Candidate,
-    Diagnosis,
-)
+from .result import MAX_DELTA_BIC, MIN_GAIN_PCT, MIN_SIZE_Z, Candidate, Diagnosis
 from .scoring import Scoring, noise_floor, scoring
 from .structure import residual_structure
+from .verdict import decide
 
 
 class _Score(NamedTuple):
@@ -193,10 +192,15 @@ def diagnose(
     candidate is significant when (1) its held-out RMSE is at least `MIN_GAIN_PCT` =
     5 % below the base's, (2) ΔBIC = BIC(candidate) - BIC(base) <= -10 on the training
     samples (BIC = n ln(SSR/n) + p ln n), and (3) its size parameter is at least
-    `MIN_SIZE_Z` = 3 standard errors from zero. The named cause is the significant
-    candidate of largest held-out gain, else `"none"`; and `"none"` whenever the base
-    model's held-out RMSE is within `MIN_EXCESS` = 1.2 times the noise level estimated
-    from the data: there is nothing left to explain.
+    `MIN_SIZE_Z` = 3 standard errors from zero. The verdict is `"none"` whenever the
+    base model's held-out RMSE is within `MIN_EXCESS` = 1.2 times the noise level
+    estimated from the data: there is nothing left to explain. Else a significant
+    candidate is named only when it is also sufficient: its held-out RMSE within
+    `MAX_FLOOR_RATIO` times the noise, or its share of the base's held-out excess
+    over the noise, 100 (base^2 - candidate^2) / (base^2 - noise^2), at least
+    `MIN_EXPLAINED_PCT` %; the named cause is the sufficient significant candidate
+    of largest held-out gain. Otherwise the verdict, and `named_cause`, is
+    `"unexplained"`: every candidate keeps its `explained_pct`.
 
     **Drives.** As in [`jaxcable.fit`][], a force-controlled test is driven by its
     force and scored on its elongation, a displacement-controlled one (relaxation, a
@@ -344,9 +348,19 @@ def diagnose(
         )
 
     noise = noise_floor(tests, how)
-    winners = [c for c in out if c.significant]
-    if winners and base.heldout_rmse > MIN_EXCESS * noise:
-        best = max(winners, key=lambda c: c.gain_pct)
+    decision = decide(
+        base.heldout_rmse,
+        noise,
+        [c.heldout_rmse for c in out],
+        [c.significant for c in out],
+        structure["autocorrelation"],
+    )
+    out = [
+        dataclasses.replace(c, explained_pct=share)
+        for c, share in zip(out, decision.explained_pct)
+    ]
+    if decision.named is not None:
+        best = out[decision.named]
         named, extended, gain = best.id, best.heldout_rmse, best.gain_pct
         effect = {
             "parameter": best.size_name,
@@ -355,7 +369,8 @@ def diagnose(
             "unit": best.size_unit,
         }
     else:
-        named, extended, gain, effect = "none", base.heldout_rmse, 0.0, {}
+        named = "unexplained" if decision.verdict == "unexplained" else "none"
+        extended, gain, effect = base.heldout_rmse, 0.0, {}
     return Diagnosis(
         base_model=type(model).__name__,
         named_cause=named,
@@ -380,4 +395,5 @@ def diagnose(
         unit=how.unit,
         drives=how.drives,
         scales=tuple(float(x) for x in how.scales),
+        verdict=decision.verdict,
     )

@@ -11,17 +11,19 @@ import numpy as np
 
 from .._files import write_text_atomic
 from .._fit import FitResult
+from .verdict import (
+    MAX_FLOOR_RATIO,
+    MIN_AUTOCORRELATION,
+    MIN_EXCESS,
+    MIN_EXPLAINED_PCT,
+)
 
 
 # Significance thresholds of a candidate (see `jaxcable.diagnose`).
 MIN_GAIN_PCT = 5.0
 MAX_DELTA_BIC = -10.0
 MIN_SIZE_Z = 3.0
-# Nothing is named while the base already predicts the held-out data to within 20 % of
-# the noise level estimated from the data: what is left is noise, and a candidate that
-# "explains" it is fitting the noise's realisation (measured: a 10 J/mol activation
-# energy, 0.03 % of time scaling, took 9 % off a base held-out RMSE of 1.1 x noise).
-MIN_EXCESS = 1.2
+# MIN_EXCESS, MAX_FLOOR_RATIO and MIN_EXPLAINED_PCT (the verdict): see `verdict.py`.
 
 
 @dataclasses.dataclass(frozen=True)
@@ -46,6 +48,9 @@ class Candidate:
     - `unit`: the unit of the RMSEs: `"mm"` (every test scored in its elongation),
         `"N"` (every test in its force) or `"noise"` (mixed drives: each residual
         divided by the noise of its test's scored channel).
+    - `explained_pct`: the share of the base's held-out excess over the noise floor
+        this candidate explains, %: 100 (base^2 - candidate^2) / (base^2 -
+        floor^2) of the held-out RMSEs (NaN when not applicable or no excess).
     - `heldout_rmse_mm`, `train_rmse_mm` (properties): the RMSEs in mm; NaN unless
         `unit` is mm.
     """
@@ -64,6 +69,7 @@ class Candidate:
     note: str = ""
     fit: FitResult | None = dataclasses.field(default=None, repr=False, compare=False)
     unit: str = "mm"
+    explained_pct: float = math.nan
 
     @property
     def heldout_rmse_mm(self) -> float:
@@ -114,17 +120,20 @@ class Diagnosis:
     **Fields:**
 
     - `base_model`: the base model's class name.
-    - `named_cause`: the id of the named extension, or `"none"`.
+    - `named_cause`: the id of the named extension, `"none"` (nothing to explain,
+        or no candidate significant and no excess), or `"unexplained"` (see
+        `verdict`).
     - `base_heldout_rmse`, `base_train_rmse`: the base model's RMSE, in `unit`.
     - `extended_heldout_rmse`: the held-out RMSE of the named extension (the base's
         when `"none"`), in `unit`.
-    - `gain_pct`: its held-out gain, % (0 for `"none"`).
+    - `gain_pct`: its held-out gain, % (0 unless a cause is named).
     - `effect`: the named effect's size: `{"parameter", "value", "stderr", "unit"}`
-        (empty for `"none"`).
+        (empty unless a cause is named).
     - `candidates`: every [`jaxcable.Candidate`][], in the order of
         [`jaxcable.EXTENSIONS`][].
-    - `structure`: the base residuals' structure: `{feature: correlation}` and the
-        lag-1 autocorrelation with its white-noise band (`residual_structure`).
+    - `structure`: the base residuals' structure: `{feature: correlation}` (the
+        test conditions and every covariate with its rate and absolute rate) and
+        the lag-1 autocorrelation with its white-noise band (`residual_structure`).
     - `noise`: the noise of the scored channels estimated from the data (robust,
         from second differences), in `unit`.
     - `split`: how held-out data were chosen.
@@ -139,6 +148,11 @@ class Diagnosis:
     - `drives`: each test's drive, `"force"` or `"elongation"`.
     - `scales`: each test's residual unit (1, or in noise units the noise standard
         deviation of its scored channel, m or N).
+    - `verdict`: `"named"` (a significant candidate comes within `MAX_FLOOR_RATIO`
+        x the noise held out, or explains at least `MIN_EXPLAINED_PCT` % of the
+        base's excess over it), `"none"` (the base is within `MIN_EXCESS` x the
+        noise: nothing to explain) or `"unexplained"` (an excess no candidate
+        explains enough; the partial ones keep their `explained_pct`).
     - `base_heldout_rmse_mm`, `base_train_rmse_mm`, `extended_heldout_rmse_mm`,
         `noise_mm` (properties): the same in mm; NaN unless `unit` is mm.
     """
@@ -160,6 +174,7 @@ class Diagnosis:
     unit: str = "mm"
     drives: tuple[str, ...] = ()
     scales: tuple[float, ...] = ()
+    verdict: str = "none"
 
     @property
     def base_heldout_rmse_mm(self) -> float:
@@ -193,6 +208,7 @@ class Diagnosis:
         and the noise in `unit`, and, as before, in mm (None unless `unit` is mm)."""
         return {
             "named_cause": self.named_cause,
+            "verdict": self.verdict,
             "base_model": self.base_model,
             "base_heldout_rmse_mm": _jsonable(self.base_heldout_rmse_mm),
             "base_train_rmse_mm": _jsonable(self.base_train_rmse_mm),
@@ -212,6 +228,9 @@ class Diagnosis:
                 "max_delta_bic": MAX_DELTA_BIC,
                 "min_size_z": MIN_SIZE_Z,
                 "min_excess_over_noise": MIN_EXCESS,
+                "max_heldout_over_noise": MAX_FLOOR_RATIO,
+                "min_explained_pct": MIN_EXPLAINED_PCT,
+                "min_autocorrelation_unexplained": MIN_AUTOCORRELATION,
             },
             "candidates": [c.to_dict() for c in self.candidates],
             "structure": _jsonable(self.structure),
@@ -241,7 +260,8 @@ class Diagnosis:
             f"RMSE {self.base_train_rmse:.4g} {u} fitted, "
             f"{self.base_heldout_rmse:.4g} {u} held out",
             "",
-            f"{'candidate':<24}{'held-out ' + u:>{w}}{'gain %':>9}{'dBIC':>10}"
+            f"{'candidate':<24}{'held-out ' + u:>{w}}{'gain %':>9}{'expl %':>8}"
+            f"{'dBIC':>10}"
             f"{'size':>12}{'+-':>10}  unit",
         ]
         for c in self.candidates:
@@ -251,12 +271,55 @@ class Diagnosis:
             mark = " *" if c.significant else ""
             lines.append(
                 f"{c.id:<24}{c.heldout_rmse:>{w}.4g}{c.gain_pct:>9.1f}"
+                f"{c.explained_pct:>8.0f}"
                 f"{c.delta_bic:>10.1f}{c.size:>12.4g}{c.size_stderr:>10.2g}  "
                 f"{c.size_unit}{mark}"
             )
         lines.append("")
+        lines += self._verdict_lines()
+        return "\n".join(lines)
+
+    def _verdict_lines(self) -> list[str]:
+        """The summary's last lines: the verdict, said plainly, and the structure."""
+        u = self.unit
+        structure = self.structure
+        strongest = structure.get("strongest")
+        r_lag = structure.get("autocorrelation", math.nan)
+        strong = (
+            f"{strongest} (r = {structure['correlation'][strongest]:.2f})"
+            if strongest
+            else "none"
+        )
+        if self.verdict == "unexplained":
+            shown = [c for c in self.candidates if math.isfinite(c.explained_pct)]
+            partial = [c for c in shown if c.significant] or shown
+            if partial:
+                best = max(partial, key=lambda c: c.explained_pct)
+                what = (
+                    f"the best candidate, {best.id}, explains "
+                    f"{best.explained_pct:.0f} % of the excess over the noise"
+                    + ("" if best.significant else " (not significant)")
+                )
+            else:
+                what = "no candidate could be fitted"
+            lines = [
+                f"verdict: unexplained — {what}; the residual stays systematic "
+                f"(lag-1 autocorrelation {r_lag:.2f}); strongest structure: {strong}",
+            ]
+            others = [c for c in partial if c is not best and c.significant]
+            if others:
+                lines.append(
+                    "other partial candidates: "
+                    + ", ".join(f"{c.id} {c.explained_pct:.0f} %" for c in others)
+                )
+            lines.append(
+                f"(a cause is named when it comes within {MAX_FLOOR_RATIO:g} x the "
+                f"noise held out or explains >= {MIN_EXPLAINED_PCT:g} % of the "
+                "excess)"
+            )
+            return lines
         if self.named_cause == "none" and (
-            self.base_heldout_rmse <= MIN_EXCESS * self.noise
+            not self.base_heldout_rmse > MIN_EXCESS * self.noise
         ):
             against = (
                 f"{self.base_heldout_rmse * 1e3:.3g} um against "
@@ -264,33 +327,37 @@ class Diagnosis:
                 if u == "mm"
                 else f"{self.base_heldout_rmse:.3g} {u} against {self.noise:.3g} {u}"
             )
-            lines.append(
-                f"named cause: none (the base predicts the held-out data to within "
-                f"{MIN_EXCESS:g} x the noise: {against})"
-            )
+            lines = [
+                f"verdict: none — the base predicts the held-out data to within "
+                f"{MIN_EXCESS:g} x the noise ({against}): nothing to explain"
+            ]
         elif self.named_cause == "none":
-            lines.append(
-                "named cause: none (no candidate improves the held-out RMSE "
+            lines = [
+                "verdict: none — no candidate improves the held-out RMSE "
                 f"significantly: gain >= {MIN_GAIN_PCT:g} %, dBIC <= "
-                f"{MAX_DELTA_BIC:g}, size >= {MIN_SIZE_Z:g} standard errors)"
-            )
+                f"{MAX_DELTA_BIC:g}, size >= {MIN_SIZE_Z:g} standard errors; and "
+                f"the residual left is not systematic (lag-1 autocorrelation "
+                f"{r_lag:.2f} < {MIN_AUTOCORRELATION:g})"
+            ]
         else:
             e = self.effect
-            lines.append(
+            named = self.candidate(self.named_cause)
+            lines = [
                 f"named cause: {self.named_cause}: {e['parameter']} = "
                 f"{e['value']:.4g} +- {e['stderr']:.2g} {e['unit']}; held-out RMSE "
                 f"{self.base_heldout_rmse:.4g} -> "
-                f"{self.extended_heldout_rmse:.4g} {u} ({self.gain_pct:.1f} % gain)"
-            )
-        strongest = self.structure.get("strongest")
+                f"{self.extended_heldout_rmse:.4g} {u} ({self.gain_pct:.1f} % gain)",
+                f"verdict: named — it explains {named.explained_pct:.0f} % of the "
+                "excess over the noise; held-out RMSE "
+                f"{self.extended_heldout_rmse / self.noise:.2f} x the noise",
+            ]
         if strongest:
             lines.append(
-                f"base residuals relate most to: {strongest} "
-                f"(r = {self.structure['correlation'][strongest]:.2f}); lag-1 "
-                f"autocorrelation {self.structure['autocorrelation']:.2f} (white "
-                f"noise: |r| < {self.structure['white_noise_band']:.2g})"
+                f"base residuals relate most to: {strong}; lag-1 "
+                f"autocorrelation {r_lag:.2f} (white "
+                f"noise: |r| < {structure['white_noise_band']:.2g})"
             )
-        return "\n".join(lines)
+        return lines
 
 
 def _scored_line(drives: tuple[str, ...], unit: str) -> str:

@@ -40,8 +40,9 @@ def _plot_residuals(path, diagnosis: Diagnosis, tests: list) -> None:
     shaded (PNG)."""
     base = _residuals(diagnosis.base_fit, diagnosis, tests)
     named = (
+        # Only a named cause has a fit to show: not "none" nor "unexplained".
         diagnosis.candidate(diagnosis.named_cause)
-        if diagnosis.named_cause != "none"
+        if diagnosis.verdict == "named"
         else None
     )
     extended = _residuals(named.fit, diagnosis, tests) if named is not None else None
@@ -122,17 +123,18 @@ def _candidate_table(diagnosis: Diagnosis) -> list[str]:
     """Every candidate's scores as the lines of a markdown table."""
     table = [
         f"| candidate | held-out RMSE {diagnosis.unit} | gain % | ΔBIC | size | ± | "
-        "unit | significant |",
-        "| --- | ---: | ---: | ---: | ---: | ---: | --- | --- |",
+        "unit | significant | explained % of the excess |",
+        "| --- | ---: | ---: | ---: | ---: | ---: | --- | --- | ---: |",
     ]
     for c in diagnosis.candidates:
         if not c.applicable:
-            table.append(f"| {c.id} | n/a | | | | | | {c.note} |")
+            table.append(f"| {c.id} | n/a | | | | | | {c.note} | |")
             continue
         table.append(
             f"| {c.id} | {c.heldout_rmse:.4g} | {c.gain_pct:.1f} | "
             f"{c.delta_bic:.1f} | {c.size:.4g} | {c.size_stderr:.2g} | "
-            f"{c.size_unit} | {'yes' if c.significant else 'no'} |"
+            f"{c.size_unit} | {'yes' if c.significant else 'no'} | "
+            f"{c.explained_pct:.0f} |"
         )
     return table
 
