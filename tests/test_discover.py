@@ -35,12 +35,12 @@ def _history(seed: int, samples: int = 150):
     return time, force, humidity
 
 
-def _tests(model, seeds=(0, 1, 2), noise=2e-6, covariate=True):
+def _tests(model, seeds=(0, 1, 2), noise=2e-6, covariate=True, samples=150):
     """Force-driven tests of `model` with noisy elongations (m) and a humidity
     column, simulated through the fit's own scan (`jc.residuals` of zero data)."""
     raw = []
     for s in seeds:
-        time, force, humidity = _history(s)
+        time, force, humidity = _history(s, samples)
         raw.append(
             jc.TestData(
                 time=time,
@@ -143,3 +143,20 @@ def test_discover_finds_nothing_in_noise():
     found = jc.discover(base_fit, tests, covariate="humidity")
     assert found.terms == () or abs(found.gain_pct) < 5, found.path
     assert found.fit is None or found.gain_pct < 5
+
+
+def test_diagnosis_discovers_the_term_the_catalogue_lacks(hidden):
+    """No catalogued candidate (here: none tried) explains the residual, so the
+    diagnosis looks for a term over every recorded covariate and names it."""
+    true = hidden[0]
+    # Dense enough (600 samples) for the noise estimate of second differences.
+    tests = _tests(true, samples=600)
+    d = jc.diagnose(tests, BASE, fit_names=BASE_FIT, candidates=[], drive="force")
+    assert d.named_cause == "discovered", d.summary()
+    assert d.verdict == "named"
+    assert d.discovered["covariate"] == "humidity"
+    assert TERM in d.discovered["terms"]
+    assert "discovered term (covariate humidity)" in d.summary()
+    document = d.to_dict()
+    assert document["discovered"]["equation"].startswith("d(eps)/dt = ")
+    assert [c["id"] for c in document["candidates"]] == ["discovered"]

@@ -33,6 +33,7 @@ import numpy as np
 
 from .._fit import FitResult, IdentifiabilityWarning, as_test_list, fit, test_id
 from .._models import EXTENSIONS, AbstractCableModel, IntegratedModel, identifiable
+from .discovery import describe, discover_term
 from .heldout import Fold, splits, with_mask
 from .result import MAX_DELTA_BIC, MIN_GAIN_PCT, MIN_SIZE_Z, Candidate, Diagnosis
 from .scoring import Scoring, noise_floor, scoring
@@ -55,6 +56,42 @@ def _bic(rmse: float, n: int, p: int, per_unit: float) -> float:
     """The Bayesian information criterion n ln(SSR / n) + p ln n, SSR in residual
     units (`rmse` / `per_unit`: per_unit is 1e3 for an RMSE in mm of residuals in m)."""
     return n * math.log(max((rmse * (1.0 / per_unit)) ** 2, 1e-300)) + p * math.log(n)
+
+
+def _discovered_candidate(
+    found, base_heldout: float, bic_base: float, how
+) -> Candidate:
+    """The discovered term scored as a candidate (mm: force-driven tests)."""
+    result = found.fit
+    n = int(np.sum(result.num_samples))
+    train = 1e3 * math.sqrt(result.loss / max(n, 1))
+    held = found.heldout_rmse_mm[1]
+    delta_bic = _bic(train, n, len(result.names), how.factor) - bic_base
+    size, stderr = float(found.values[0]), float(found.stderr[0])
+    z = abs(size) / stderr if stderr > 0 else (math.inf if size != 0 else 0.0)
+    gain = 100.0 * (base_heldout - held) / base_heldout
+    significant = bool(
+        math.isfinite(held)
+        and gain >= MIN_GAIN_PCT
+        and delta_bic <= MAX_DELTA_BIC
+        and z >= MIN_SIZE_Z
+    )
+    return Candidate(
+        "discovered",
+        held,
+        gain,
+        train,
+        delta_bic,
+        size,
+        stderr,
+        found.units[0],
+        f"theta0 ({found.terms[0]})",
+        significant,
+        True,
+        found.equation,
+        result,
+        how.unit,
+    )
 
 
 def _applicability(ext_id: str, tests) -> str:
@@ -185,6 +222,7 @@ def diagnose(
     key=None,
     progress=None,
     drive="auto",
+    discover: bool | None = None,
 ) -> Diagnosis:
     """Find what a model gets wrong on measured data and name the physical cause.
 
@@ -201,6 +239,15 @@ def diagnose(
     `MIN_EXPLAINED_PCT` %; the named cause is the sufficient significant candidate
     of largest held-out gain. Otherwise the verdict, and `named_cause`, is
     `"unexplained"`: every candidate keeps its `explained_pct`.
+
+    **Discovery.** When the verdict would be `"unexplained"` (or `discover=True`),
+    [`jaxcable.discover`][] looks for a term the catalogue lacks: a sparse regression
+    of the base's residual on a library of terms of the model's own state and of
+    every recorded covariate (each extra column in turn), fitted jointly with the
+    base; it becomes the candidate `"discovered"`, scored like the others (same
+    held-out samples, BIC, size = its first coefficient), and is named
+    (`named_cause="discovered"`, the equation in `Diagnosis.discovered`) when it is
+    significant and sufficient. It runs on the time split of force-driven tests.
 
     **Drives.** As in [`jaxcable.fit`][], a force-controlled test is driven by its
     force and scored on its elongation, a displacement-controlled one (relaxation, a
@@ -234,6 +281,8 @@ def diagnose(
     - `progress`: an optional callable `progress(message: str)` told of each fit.
     - `drive`: `"auto"` (default: each test's `metadata['control']`, else detected
         from its data), `"force"`, `"elongation"`, or one of these per test.
+    - `discover`: look for a discovered term: None (default) when the verdict would
+        be `"unexplained"`, True always, False never.
 
     **Returns:**
 
@@ -355,6 +404,21 @@ def diagnose(
         [c.significant for c in out],
         structure["autocorrelation"],
     )
+    discovered: dict = {}
+    wanted = decision.verdict == "unexplained" if discover is None else discover
+    if wanted and split == "time" and how.unit == "mm":
+        say("discovering a term")
+        found, scores = discover_term(base_fit, tests, holdout, max_steps=max_steps)
+        if found is not None and found.fit is not None:
+            out.append(_discovered_candidate(found, base.heldout_rmse, bic_base, how))
+            discovered = {**describe(found), "covariate_scores_mm": scores}
+            decision = decide(
+                base.heldout_rmse,
+                noise,
+                [c.heldout_rmse for c in out],
+                [c.significant for c in out],
+                structure["autocorrelation"],
+            )
     out = [
         dataclasses.replace(c, explained_pct=share)
         for c, share in zip(out, decision.explained_pct)
@@ -396,4 +460,5 @@ def diagnose(
         drives=how.drives,
         scales=tuple(float(x) for x in how.scales),
         verdict=decision.verdict,
+        discovered=discovered,
     )

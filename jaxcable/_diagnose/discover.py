@@ -178,12 +178,16 @@ def _sensitivities(base, base_fit: FitResult, tests) -> list[np.ndarray]:
 
 
 def _heldout_rmse_mm(model, tests, held, covariate) -> float:
+    """RMSE over the held-out samples each test's own mask keeps (as the
+    diagnosis scores), mm."""
     response = model_responses(model, tests, drive="force", covariate=covariate)
-    sq = sum(
-        float(np.sum((r - np.asarray(t.elongation, float))[h] ** 2))
-        for r, t, h in zip(response, tests, held)
-    )
-    return 1e3 * math.sqrt(sq / max(sum(int(h.sum()) for h in held), 1))
+    sq, n = 0.0, 0
+    for r, t, h in zip(response, tests, held):
+        own = getattr(t, "mask", None)
+        keep = h if own is None else h & np.asarray(own, bool)
+        sq += float(np.sum((r - np.asarray(t.elongation, float))[keep] ** 2))
+        n += int(keep.sum())
+    return 1e3 * math.sqrt(sq / max(n, 1))
 
 
 def discover(

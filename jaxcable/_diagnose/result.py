@@ -148,6 +148,9 @@ class Diagnosis:
     - `drives`: each test's drive, `"force"` or `"elongation"`.
     - `scales`: each test's residual unit (1, or in noise units the noise standard
         deviation of its scored channel, m or N).
+    - `discovered`: the term [`jaxcable.discover`][] found when the catalogue did
+        not explain the residual (equation, terms, covariate, coefficients with
+        standard errors and units, held-out RMSEs, gain), else empty.
     - `verdict`: `"named"` (a significant candidate comes within `MAX_FLOOR_RATIO`
         x the noise held out, or explains at least `MIN_EXPLAINED_PCT` % of the
         base's excess over it), `"none"` (the base is within `MIN_EXCESS` x the
@@ -175,6 +178,7 @@ class Diagnosis:
     drives: tuple[str, ...] = ()
     scales: tuple[float, ...] = ()
     verdict: str = "none"
+    discovered: dict[str, Any] = dataclasses.field(default_factory=dict)
 
     @property
     def base_heldout_rmse_mm(self) -> float:
@@ -233,6 +237,7 @@ class Diagnosis:
                 "min_autocorrelation_unexplained": MIN_AUTOCORRELATION,
             },
             "candidates": [c.to_dict() for c in self.candidates],
+            "discovered": _jsonable(self.discovered),
             "structure": _jsonable(self.structure),
             "tests": list(self.test_ids),
         }
@@ -276,6 +281,10 @@ class Diagnosis:
                 f"{c.size_unit}{mark}"
             )
         lines.append("")
+        if self.discovered:
+            d = self.discovered
+            covariate = f" (covariate {d['covariate']})" if d.get("covariate") else ""
+            lines += [f"discovered term{covariate}: {d['equation']}", ""]
         lines += self._verdict_lines()
         return "\n".join(lines)
 
