@@ -3,11 +3,12 @@ explains the residual, [`jaxcable.discover`][] looks for the term that does, ove
 every recorded covariate, and the term is scored like the catalogue's candidates."""
 
 import math
+import warnings
 from typing import Any
 
 import numpy as np
 
-from .._fit import FitResult
+from .._fit import FitResult, IdentifiabilityWarning
 from .discover import DiscoveryResult, discover
 from .heldout import heldout_start
 
@@ -72,7 +73,12 @@ def discover_term(
     if not scores:
         return None, scores
     options = {"multistart": 1, **fit_kwargs}
-    return discover(base_fit, tests, covariate=best, held=held, **options), scores
+    # As for the catalogue's candidates, identifiability is reported in the
+    # candidate's fit, not warned about.
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", IdentifiabilityWarning)
+        found = discover(base_fit, tests, covariate=best, held=held, **options)
+    return found, scores
 
 
 def describe(found: DiscoveryResult) -> dict[str, Any]:
