@@ -67,7 +67,13 @@ def _discovered_candidate(
     train = 1e3 * math.sqrt(result.loss / max(n, 1))
     held = found.heldout_rmse_mm[1]
     delta_bic = _bic(train, n, len(result.names), how.factor) - bic_base
-    size, stderr = float(found.values[0]), float(found.stderr[0])
+    # Its size: the best-determined of its terms (a support may carry a weak
+    # companion term, which the forward selection kept for a small held-out gain).
+    values, errors = np.asarray(found.values, float), np.asarray(found.stderr, float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        zs = np.where(errors > 0, np.abs(values) / errors, np.inf)
+    k = int(np.nanargmax(np.where(np.isfinite(values), zs, -1.0)))
+    size, stderr = float(values[k]), float(errors[k])
     z = abs(size) / stderr if stderr > 0 else (math.inf if size != 0 else 0.0)
     gain = 100.0 * (base_heldout - held) / base_heldout
     significant = bool(
@@ -84,8 +90,8 @@ def _discovered_candidate(
         delta_bic,
         size,
         stderr,
-        found.units[0],
-        f"theta0 ({found.terms[0]})",
+        found.units[k],
+        f"theta{k} ({found.terms[k]})",
         significant,
         True,
         found.equation,
@@ -245,7 +251,7 @@ def diagnose(
     of the base's residual on a library of terms of the model's own state and of
     every recorded covariate (each extra column in turn), fitted jointly with the
     base; it becomes the candidate `"discovered"`, scored like the others (same
-    held-out samples, BIC, size = its first coefficient), and is named
+    held-out samples, BIC, size = its best-determined coefficient), and is named
     (`named_cause="discovered"`, the equation in `Diagnosis.discovered`) when it is
     significant and sufficient. It runs on the time split of force-driven tests.
 
