@@ -36,6 +36,10 @@ DEFAULT_DIAMETER_MM = 3.0
 DEFAULT_RATE_MM_PER_MIN = 3.0
 
 
+def _optional_array(x):
+    return None if x is None else jnp.asarray(x)
+
+
 def speed_from_mm_per_min(rate_mm_per_min):
     """The crosshead speed in m/s of a rate in mm/min (the unit of data files)."""
     return rate_mm_per_min * M_PER_MM / 60
@@ -62,7 +66,7 @@ class Cable(eqx.Module):
         temperature-dependent models read it (e.g. [`jaxcable.TemperatureShift`][]);
         the fit and the drivers set it per sample from a test's temperature record.
     - `covariate`: the value of one recorded covariate column at this sample, in the
-        unit of that column (default 0.0): humidity, moisture content, a second
+        unit of that column (default None, read as 0): humidity, moisture content, a second
         thermocouple, ... Only covariate-dependent models read it (e.g.
         `jaxcable.DiscoveredTerm`); the fit sets it per sample from the column named
         by its `covariate` argument (see [`jaxcable.pad_tests`][]). Any sign.
@@ -81,7 +85,11 @@ class Cable(eqx.Module):
     temperature: Float[Array, "*batch"] = eqx.field(
         converter=jnp.asarray, default=293.15
     )
-    covariate: Float[Array, "*batch"] = eqx.field(converter=jnp.asarray, default=0.0)
+    # None unless set: a batch of cables built without it still vmaps (None has no
+    # leaves to map), and models read None as 0.
+    covariate: Float[Array, "*batch"] | None = eqx.field(
+        converter=_optional_array, default=None
+    )
 
     def __check_init__(self):
         for name in _POSITIVE_FIELDS:
@@ -148,6 +156,8 @@ class Cable(eqx.Module):
 def check_scalar_cable(cable: Cable) -> None:
     """Raise `ValueError` unless every field of `cable` is a scalar (one cable)."""
     for name in CABLE_FIELDS:
+        if getattr(cable, name) is None:
+            continue
         shape = jnp.shape(getattr(cable, name))
         if shape != ():
             raise ValueError(

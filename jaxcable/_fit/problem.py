@@ -58,7 +58,12 @@ def _elongation_history(
 
     def body(carry: CableState, x):
         t, f, m, temp, cov = x
-        here = eqx.tree_at(lambda c: (c.temperature, c.covariate), cable, (temp, cov))
+        here = eqx.tree_at(
+            lambda c: (c.temperature, c.covariate),
+            cable,
+            (temp, cov),
+            is_leaf=lambda x: x is None,
+        )
         new, _ = step(model, here, carry, t, f)
         new = jax.tree_util.tree_map(lambda a, b: jnp.where(m, a, b), new, carry)
         return new, new.strain
@@ -84,7 +89,12 @@ def _force_history(
 
     def body(carry: CableState, x):
         t, e, m, temp, cov = x
-        here = eqx.tree_at(lambda c: (c.temperature, c.covariate), cable, (temp, cov))
+        here = eqx.tree_at(
+            lambda c: (c.temperature, c.covariate),
+            cable,
+            (temp, cov),
+            is_leaf=lambda x: x is None,
+        )
         new, _ = drive.step(model, here, carry, ElongationSample(t, e, m))
         return new, new.force
 

@@ -132,7 +132,7 @@ def check_cables(cables) -> Cable:
             f"`cables` must be a jaxcable.Cable (fields of shape (cables,)), got "
             f"{type(cables).__name__}."
         )
-    names = CABLE_FIELDS
+    names = [n for n in CABLE_FIELDS if getattr(cables, n) is not None]
     shapes = {n: jnp.shape(getattr(cables, n)) for n in names}
     if any(len(s) > 1 for s in shapes.values()):
         raise ValueError(

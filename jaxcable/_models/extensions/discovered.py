@@ -236,7 +236,9 @@ class DiscoveredTerm(AbstractExtension[DiscoveredTermState]):
     ) -> tuple[DiscoveredTermState, StrainParts]:
         base_state, parts = self.base.advance(state.base, cable, dt, force, direction)
         area = cable.area
-        covariate = jnp.asarray(cable.covariate, state.covariate.dtype)
+        covariate = jnp.asarray(
+            0.0 if cable.covariate is None else cable.covariate, state.covariate.dtype
+        )
         # The first step has no previous covariate: no change of it then.
         c0 = jnp.where(state.started, state.covariate, covariate)
         force_max = running_max(state.force_max, force)
