@@ -403,13 +403,17 @@ def diagnose(
         )
 
     noise = noise_floor(tests, how)
-    decision = decide(
-        base.heldout_rmse,
-        noise,
-        [c.heldout_rmse for c in out],
-        [c.significant for c in out],
-        structure["autocorrelation"],
-    )
+
+    def verdict_on(candidates):
+        return decide(
+            base.heldout_rmse,
+            noise,
+            [c.heldout_rmse for c in candidates],
+            [c.significant for c in candidates],
+            structure["autocorrelation"],
+        )
+
+    decision = verdict_on(out)
     discovered: dict = {}
     wanted = decision.verdict == "unexplained" if discover is None else discover
     if wanted and split == "time" and how.unit == "mm":
@@ -418,13 +422,7 @@ def diagnose(
         if found is not None and found.fit is not None:
             out.append(_discovered_candidate(found, base.heldout_rmse, bic_base, how))
             discovered = {**describe(found), "covariate_scores_mm": scores}
-            decision = decide(
-                base.heldout_rmse,
-                noise,
-                [c.heldout_rmse for c in out],
-                [c.significant for c in out],
-                structure["autocorrelation"],
-            )
+            decision = verdict_on(out)
     out = [
         dataclasses.replace(c, explained_pct=share)
         for c, share in zip(out, decision.explained_pct)
