@@ -40,6 +40,16 @@ _DOMAIN_MESSAGE = (
 )
 
 
+def _at_sample(cable, temperature, covariate):
+    """The cable at one sample: its recorded temperature (K) and covariate."""
+    return eqx.tree_at(
+        lambda c: (c.temperature, c.covariate),
+        cable,
+        (temperature, covariate),
+        is_leaf=lambda x: x is None,
+    )
+
+
 def _elongation_history(
     model, cable, time, force, mask, temperature, covariate
 ) -> tuple[Float[Array, " samples"], RESULTS]:
@@ -58,12 +68,7 @@ def _elongation_history(
 
     def body(carry: CableState, x):
         t, f, m, temp, cov = x
-        here = eqx.tree_at(
-            lambda c: (c.temperature, c.covariate),
-            cable,
-            (temp, cov),
-            is_leaf=lambda x: x is None,
-        )
+        here = _at_sample(cable, temp, cov)
         new, _ = step(model, here, carry, t, f)
         new = jax.tree_util.tree_map(lambda a, b: jnp.where(m, a, b), new, carry)
         return new, new.strain
@@ -89,12 +94,7 @@ def _force_history(
 
     def body(carry: CableState, x):
         t, e, m, temp, cov = x
-        here = eqx.tree_at(
-            lambda c: (c.temperature, c.covariate),
-            cable,
-            (temp, cov),
-            is_leaf=lambda x: x is None,
-        )
+        here = _at_sample(cable, temp, cov)
         new, _ = drive.step(model, here, carry, ElongationSample(t, e, m))
         return new, new.force
 
