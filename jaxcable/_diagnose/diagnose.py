@@ -31,12 +31,14 @@ from typing import Literal, NamedTuple
 
 import numpy as np
 
-from .._fit import FitResult, IdentifiabilityWarning, as_test_list, fit, test_id
+from .._fit import FitResult, IdentifiabilityWarning, as_test_list, fit_subset, test_id
+from .._fit.parameters import declared_parameters
 from .._models import EXTENSIONS, AbstractCableModel, IntegratedModel, identifiable
 from .discovery import describe, discover_term
 from .heldout import Fold, splits, with_mask
 from .result import MAX_DELTA_BIC, MIN_GAIN_PCT, MIN_SIZE_Z, Candidate, Diagnosis
 from .scoring import Scoring, noise_floor, scoring
+from .stack import Stack, stack_of
 from .structure import residual_structure
 from .verdict import decide
 
@@ -119,13 +121,10 @@ def _applicability(ext_id: str, tests) -> str:
 def _score(
     parts: list[Fold],
     start_models: Callable[[int], list[AbstractCableModel]],
-    names: tuple[str, ...] | None,
+    fitter: Callable,
     *,
     how: Scoring,
     same_tests: bool,
-    multistart: int,
-    max_steps: int,
-    key,
     base_losses: list[float] | None = None,
 ) -> _Score:
     """Fit and score one model on every fold of `parts`.
@@ -133,42 +132,30 @@ def _score(
     `start_models(k)` gives fold k's start models: the first is fitted; when its
     training SSR is above the base model's on that fold (`base_losses`), the second is
     fitted too and the better kept, so that a candidate never fits its training data
-    worse than the base it contains. Every fit and simulation uses the drives of
-    `how`, fixed on the whole tests; the scores are in its units. `same_tests`: the
-    held-out tests are the training tests with other masks (the time split), so one
+    worse than the base it contains. `fitter(model, tests, index)` fits a start to
+    the training tests `index` and gives `(result, model)`: the result to report and
+    the fitted model to simulate (the stack, whose simulation one compiled program
+    serves for every candidate). Every fit and simulation uses the drives of `how`,
+    fixed on the whole tests; the scores are in its units. `same_tests`: the held-out
+    tests are the training tests with other masks (the time split), so one
     simulation serves both.
     """
-
-    def run_fit(m, train, index):
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", IdentifiabilityWarning)
-            return fit(
-                m,
-                train,
-                fit=names,
-                multistart=multistart,
-                max_steps=max_steps,
-                key=key,
-                throw=False,
-                drive=[how.drives[i] for i in index],
-            )
-
     sq_held = n_held = sq_train = n_train = 0.0
     results = []
     for k, fold in enumerate(parts):
         first, *others = start_models(k)
-        result = run_fit(first, fold.train, fold.train_index)
+        result, fitted = fitter(first, fold.train, fold.train_index)
         if base_losses is not None and others and not (result.loss <= base_losses[k]):
-            other = run_fit(others[0], fold.train, fold.train_index)
-            if not (result.loss <= other.loss):
-                result = other
+            other = fitter(others[0], fold.train, fold.train_index)
+            if not (result.loss <= other[0].loss):
+                result, fitted = other
         results.append(result)
         if not math.isfinite(result.loss):
             return _Score(math.inf, math.inf, 1, results)
-        r_train = how.residuals(result, fold.train, fold.train_index)
+        r_train = how.residuals(fitted, fold.train, fold.train_index)
         # Shared parameters only, so the fitted model runs on any test.
         r_held = (
-            r_train if same_tests else how.residuals(result, fold.held, fold.held_index)
+            r_train if same_tests else how.residuals(fitted, fold.held, fold.held_index)
         )
         for t, r in zip(fold.train, r_train):
             m = np.asarray(t.mask, bool)
@@ -184,6 +171,40 @@ def _score(
         int(n_train),
         results,
     )
+
+
+def _stack_fitter(stack: Stack, how: Scoring, base_model, **options):
+    """`fitter(active, multistart=1)`: the `fitter` of `_score` for the base (`active`
+    None) or a candidate, every one through the stack's one compiled kernel (a layout per
+    number of training tests)."""
+    layouts: dict[int, object] = {}
+
+    def layout(tests, drives):
+        if len(tests) not in layouts:
+            layouts[len(tests)] = stack.layout(base_model, tests, drives)
+        return layouts[len(tests)]
+
+    def fitter(active, multistart=1):
+        def run(start, tests, index):
+            drives = [how.drives[i] for i in index]
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", IdentifiabilityWarning)
+                raw = fit_subset(
+                    start,
+                    tests,
+                    layout(tests, drives),
+                    stack.free(active),
+                    size=stack.size,
+                    throw=False,
+                    drive=drives,
+                    multistart=multistart,
+                    **options,
+                )
+            return stack.result_of(raw, active), raw.model
+
+        return run
+
+    return fitter
 
 
 def _check_arguments(tests, model, ids, split, holdout, k) -> None:
@@ -313,14 +334,36 @@ def diagnose(
         for t in tests
     ]
     names = tuple(fit_names) if fit_names is not None else identifiable(model)
+    if names is None:  # not in the registry: every parameter
+        names = tuple(declared_parameters(model))
     say = progress or (lambda message: None)
     # The drives and residual units, once for the whole tests: no fold re-detects.
     how = scoring(tests, drive)
     parts = splits(tests, split, holdout, k)
-    settings = dict(how=how, same_tests=split == "time", max_steps=max_steps, key=key)
+    settings = dict(how=how, same_tests=split == "time")
+
+    # Which candidates the data can show and the base can carry.
+    reasons = {}
+    for ext_id in ids:
+        reason = _applicability(ext_id, tests)
+        if not reason:
+            try:
+                EXTENSIONS[ext_id].wrap(model)
+            except ValueError as e:
+                reason = str(e)
+        reasons[ext_id] = reason
+    # The base and every candidate are one model, each fit a choice of free
+    # parameters: one compiled kernel (and one simulation) serves them all.
+    stack = stack_of(model, [i for i in ids if not reasons[i]], names)
+    fitter = _stack_fitter(stack, how, model, max_steps=max_steps, key=key)
 
     say(f"fitting the base model {type(model).__name__}")
-    base = _score(parts, lambda k: [model], names, multistart=multistart, **settings)
+    base = _score(
+        parts,
+        lambda k: [stack.model(model, None)],
+        fitter(None, multistart),
+        **settings,
+    )
     base_fit = base.fits[0]
     base_losses = [r.loss for r in base.fits]
     if not math.isfinite(base.heldout_rmse):
@@ -333,7 +376,7 @@ def diagnose(
     # structure analysis.
     structure = residual_structure(
         tests,
-        how.residuals(base_fit, tests, range(len(tests))),
+        how.residuals(stack.model(base_fit.model, None), tests, range(len(tests))),
         drives=how.drives,
         unit=how.unit,
     )
@@ -341,28 +384,23 @@ def diagnose(
     out = []
     for ext_id in ids:
         cls = EXTENSIONS[ext_id]
-        reason = _applicability(ext_id, tests)
-        if not reason:
-            try:
-                # From the user's start (not the base fit, which has absorbed part
-                # of the effect into the base's parameters and is often a local
-                # minimum for the extended model), then from the base fit when that
-                # fits the training data worse than the base did.
-                starts = [cls.wrap(model), *(cls.wrap(r.model) for r in base.fits)]
-            except ValueError as e:
-                reason = str(e)
-        if reason:
+        if reasons[ext_id] or ext_id not in stack.ids:
+            reason = reasons[ext_id] or f"{cls.__name__} cannot wrap the base model"
             out.append(Candidate.not_applicable(ext_id, cls, reason, how.unit))
             continue
         say(f"fitting candidate {ext_id}")
-        # The candidates refit the base's fitted parameters (all of them when `names`
-        # is None) plus their own effect fields, never the extension's fixed ones.
-        fitted = tuple("base." + n for n in base_fit.names) + tuple(cls.EFFECT_FIELDS)
+        # From the user's start (not the base fit, which has absorbed part of the
+        # effect into the base's parameters and is often a local minimum for the
+        # extended model), then from the base fit when that fits the training data
+        # worse than the base did. The candidates refit the base's fitted
+        # parameters plus their own effect fields, never the extension's fixed ones.
+        starts = [stack.model(model, ext_id)] + [
+            stack.model(r.model, ext_id) for r in base.fits
+        ]
         scored = _score(
             parts,
             lambda k: [starts[0], starts[1 + k]],
-            fitted,
-            multistart=1,
+            fitter(ext_id),
             base_losses=base_losses,
             **settings,
         )

@@ -300,16 +300,36 @@ def fit(
     kernel = current_fit_kernel()
     out = kernel(problem, u_user, key, solver, max_steps, jac, multistart, spread)
     _require_valid_start(out, test_list, problem)
-    converged, message, ssr, stats = _outcome(out, layout.labels, n, throw)
+    units = tuple(u for u, s in zip(layout.units, layout.sizes) for _ in range(s))
+    per = tuple(n for n, q in zip(layout.names, layout.per_test) if q)
+    return fit_result(out, problem, test_list, layout.labels, units, per, throw)
+
+
+def fit_result(
+    out: KernelOut,
+    problem: Problem,
+    test_list: list,
+    labels: tuple[str, ...],
+    units: tuple[str, ...],
+    per_test: tuple[str, ...],
+    throw: bool,
+) -> FitResult:
+    """The [`jaxcable.FitResult`][] of a kernel's output (`labels`, `units`: of each
+    entry of the output's `natural`; `per_test`: the names fitted per test); with
+    `throw`, a `RuntimeError` when no start converged. Identifiability warnings are
+    issued."""
+    num_samples = np.asarray(problem.data.weight).sum(axis=1).astype(int)
+    n = int(num_samples.sum())
+    converged, message, ssr, stats = _outcome(out, labels, n, throw)
     for text in stats.warnings:
-        warnings.warn(text, IdentifiabilityWarning, stacklevel=2)
+        warnings.warn(text, IdentifiabilityWarning, stacklevel=3)
     fitted_model, models = _fitted_models(out, problem)
     rmse_mm, rmse_n, rmse_percent = _rmse(out, problem, num_samples)
     return FitResult(
         model=fitted_model,
         models=models,
-        names=layout.labels,
-        units=tuple(u for u, s in zip(layout.units, layout.sizes) for _ in range(s)),
+        names=labels,
+        units=units,
         values=stats.values,
         stderr=stats.stderr,
         covariance=stats.covariance,
@@ -328,5 +348,5 @@ def fit(
         message=message,
         num_steps=int(out.steps[int(out.best)]),
         start_losses=np.asarray(out.ssr, float),
-        per_test=tuple(n for n, q in zip(layout.names, layout.per_test) if q),
+        per_test=per_test,
     )

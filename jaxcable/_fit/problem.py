@@ -9,7 +9,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Bool, Float, PyTree
+from jaxtyping import Array, Bool, Float, Int, PyTree
 
 from .. import _checks
 from .._cable import Cable
@@ -199,6 +199,12 @@ class Problem(eqx.Module):
     - `base`: the inexact-array fields of the start model (the fixed values).
     - `scales`: the scale s of each name's `"linear"` transform (1 where unused).
     - `data`: the padded tests.
+    - `select`, `fixed`, `free`: for a problem that solves a subset of the layout
+        (`jaxcable._fit.shared`, one compiled kernel for every subset): the entry of
+        u set by each coordinate of the solver's vector v (index `p`, one past the
+        end, for a padding coordinate that sets nothing), the u of the other
+        entries, and whether each entry of u is solved; an unsolved parameter keeps
+        its value in `base`. None (the default): v is u, every entry solved.
     """
 
     layout: Layout = eqx.field(static=True)
@@ -206,10 +212,28 @@ class Problem(eqx.Module):
     base: PyTree
     scales: Float[Array, " names"]
     data: PaddedTests
+    select: Int[Array, " q"] | None = None
+    fixed: Float[Array, " p"] | None = None
+    free: Bool[Array, " p"] | None = None
 
-    def natural(self, u: Float[Array, " p"]) -> dict[str, Array]:
-        """{name: natural value} of the fitted parameters."""
-        split = self.layout.split(u)
+    def full(self, v: Float[Array, " q"]) -> Float[Array, " p"]:
+        """u from the solver's vector v (v itself unless a subset is solved)."""
+        if self.select is None:
+            return v
+        slots = jnp.concatenate([self.fixed, jnp.zeros((1,), self.fixed.dtype)])
+        return slots.at[self.select].set(v)[:-1]
+
+    def reduce(self, x: Array) -> Array:
+        """The solver coordinates' entries of a vector laid out as u (0 at padding)."""
+        if self.select is None:
+            return x
+        return jnp.concatenate([x, jnp.zeros((1,), x.dtype)])[self.select]
+
+    def natural(self, v: Float[Array, " q"]) -> dict[str, Array]:
+        """{name: natural value} of the fitted parameters (unsolved ones: as in
+        `base`)."""
+        split = self.layout.split(self.full(v))
+        free = None if self.free is None else self.layout.split(self.free)
         out = {}
         # Bounded transforms read their bound, so they come after the others.
         order = sorted(
@@ -222,7 +246,12 @@ class Problem(eqx.Module):
             bound = None
             if other is not None:
                 bound = out[other] if other in out else field_at(self.base, other)
-            out[name] = to_natural(transform, split[name], self.scales[i], bound)
+            value = to_natural(transform, split[name], self.scales[i], bound)
+            if free is not None:
+                # A select, not arithmetic: an unsolved value may be inf (E_k), and
+                # its u a placeholder whose tangent must not reach the model.
+                value = jnp.where(free[name], value, field_at(self.base, name))
+            out[name] = value
         return out
 
     def natural_flat(self, u: Float[Array, " p"]) -> Float[Array, " p"]:

@@ -196,9 +196,11 @@ def _data_derived_start(
     """
     layout = problem.layout
     dtype = u_user.dtype
-    power = jnp.concatenate(
-        [jnp.full((s,), k) for s, k in zip(layout.sizes, layout.stiffness)]
-    ).astype(dtype)
+    power = problem.reduce(
+        jnp.concatenate(
+            [jnp.full((s,), k) for s, k in zip(layout.sizes, layout.stiffness)]
+        ).astype(dtype)
+    )
     data = problem.data
     measured = data.measured / data.scale[:, None]
     # A stiffer model lengthens less under a force (the elongation scales as 1 / c)
@@ -300,7 +302,7 @@ def fit_kernel(
     A `KernelOut`.
     """
     u_start, start_ok = _data_derived_start(problem, u_user)
-    noise = spread * jr.normal(key, (num_starts - 1, problem.layout.size), u_user.dtype)
+    noise = spread * jr.normal(key, (num_starts - 1, u_user.shape[0]), u_user.dtype)
     starts = jnp.concatenate([u_start[None], u_start[None] + noise])
     data = problem.data
     # One start after the other: a vmapped solve compiles about twice as slowly, and

@@ -127,8 +127,8 @@ class AbstractExtension(AbstractCableModel[_State]):
         candidates of the diagnosis);
     - `EFFECT_FIELDS`: its own parameters that a diagnosis fits together with the
         base model's;
-    - `SIZE_FIELD`, `SIZE_UNIT`: the one field reported as the size of the effect,
-        and its unit;
+    - `SIZE_FIELD`, `SIZE_UNIT`, `SIZE_NULL`: the one field reported as the size of
+        the effect, its unit, and its null value (the base exactly);
     - `FIT_INFO`: `{field: (transform, unit[, stiffness])}` for each fitted field,
         with transform `"log"` (positive) or `"linear"` (either sign, scaled by
         |start|), and the optional power with which the field follows a stiffness
@@ -145,6 +145,7 @@ class AbstractExtension(AbstractCableModel[_State]):
     EFFECT_FIELDS: eqx.AbstractClassVar[tuple[str, ...]]
     SIZE_FIELD: eqx.AbstractClassVar[str]
     SIZE_UNIT: eqx.AbstractClassVar[str]
+    SIZE_NULL: eqx.AbstractClassVar[float]
     FIT_INFO: eqx.AbstractClassVar[dict[str, tuple]]
 
     @classmethod
@@ -162,6 +163,26 @@ class AbstractExtension(AbstractCableModel[_State]):
 
         An instance of the extension.
         """
+
+    @classmethod
+    def switched_off(cls, base: AbstractCableModel) -> "AbstractExtension":
+        """[`wrap`][]`(base)` with its size at `SIZE_NULL`: the base exactly, with the
+        other effect fields at their start values (e.g. the nested extensions a
+        diagnosis fits one at a time).
+
+        **Arguments:**
+
+        - `base`: the model to wrap.
+
+        **Returns:**
+
+        An instance of the extension.
+        """
+        model = cls.wrap(base)
+        null = jnp.asarray(
+            cls.SIZE_NULL, jnp.result_type(getattr(model, cls.SIZE_FIELD))
+        )
+        return eqx.tree_at(lambda m: getattr(m, cls.SIZE_FIELD), model, null)
 
 
 def add_parts(

@@ -52,6 +52,7 @@ class TerminationCompliance(AbstractExtension[PyTree]):
     EFFECT_FIELDS: ClassVar[tuple[str, ...]] = ("compliance",)
     SIZE_FIELD: ClassVar[str] = "compliance"
     SIZE_UNIT: ClassVar[str] = "m/N"
+    SIZE_NULL: ClassVar[float] = 0.0
     FIT_INFO: ClassVar[dict[str, tuple]] = {"compliance": ("log", "m/N", -1.0)}
 
     base: AbstractCableModel
@@ -153,6 +154,7 @@ class BeddingIn(AbstractExtension[BeddingInState]):
     EFFECT_FIELDS: ClassVar[tuple[str, ...]] = ("s_b", "F_b")
     SIZE_FIELD: ClassVar[str] = "s_b"
     SIZE_UNIT: ClassVar[str] = "-"
+    SIZE_NULL: ClassVar[float] = 0.0
     FIT_INFO: ClassVar[dict[str, tuple]] = {
         "s_b": ("log", "-", -1.0),
         "F_b": ("log", "N"),
@@ -249,6 +251,7 @@ class SensorDrift(AbstractExtension[SensorDriftState]):
     EFFECT_FIELDS: ClassVar[tuple[str, ...]] = ("drift_rate",)
     SIZE_FIELD: ClassVar[str] = "drift_rate"
     SIZE_UNIT: ClassVar[str] = "m/s"
+    SIZE_NULL: ClassVar[float] = 0.0
     FIT_INFO: ClassVar[dict[str, tuple]] = {"drift_rate": ("linear", "m/s")}
 
     base: AbstractCableModel

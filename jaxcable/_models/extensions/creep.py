@@ -125,6 +125,7 @@ class Hereditary(AbstractExtension[HereditaryState]):
     EFFECT_FIELDS: ClassVar[tuple[str, ...]] = ("weight",)
     SIZE_FIELD: ClassVar[str] = "weight"
     SIZE_UNIT: ClassVar[str] = "-"
+    SIZE_NULL: ClassVar[float] = 0.0
     FIT_INFO: ClassVar[dict[str, tuple]] = {"weight": ("log", "-")}
 
     base: AbstractCableModel
@@ -237,6 +238,7 @@ class SecondRetardation(AbstractExtension[SecondRetardationState]):
     EFFECT_FIELDS: ClassVar[tuple[str, ...]] = ("E_k", "tau_k")
     SIZE_FIELD: ClassVar[str] = "E_k"
     SIZE_UNIT: ClassVar[str] = "Pa"
+    SIZE_NULL: ClassVar[float] = math.inf
     FIT_INFO: ClassVar[dict[str, tuple]] = {
         "E_k": ("log", "Pa", 1.0),
         "tau_k": ("log", "s"),
@@ -363,6 +365,7 @@ class StressNonlinearCreep(AbstractExtension[StressNonlinearCreepState]):
     EFFECT_FIELDS: ClassVar[tuple[str, ...]] = ("n",)
     SIZE_FIELD: ClassVar[str] = "n"
     SIZE_UNIT: ClassVar[str] = "-"
+    SIZE_NULL: ClassVar[float] = 0.0
     FIT_INFO: ClassVar[dict[str, tuple]] = {"n": ("log", "-")}
 
     base: AbstractCableModel

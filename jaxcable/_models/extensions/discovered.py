@@ -178,6 +178,7 @@ class DiscoveredTerm(AbstractExtension[DiscoveredTermState]):
     EFFECT_FIELDS: ClassVar[tuple[str, ...]] = THETA_FIELDS
     SIZE_FIELD: ClassVar[str] = "theta0"
     SIZE_UNIT: ClassVar[str] = "1/s per unit of phi"
+    SIZE_NULL: ClassVar[float] = 0.0
     FIT_INFO: ClassVar[dict[str, tuple]] = {
         name: ("linear", "1/s per unit of phi") for name in THETA_FIELDS
     }

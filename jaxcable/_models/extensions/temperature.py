@@ -145,6 +145,7 @@ class TemperatureShift(AbstractTemperatureShift):
     EFFECT_FIELDS: ClassVar[tuple[str, ...]] = ("activation_energy",)
     SIZE_FIELD: ClassVar[str] = "activation_energy"
     SIZE_UNIT: ClassVar[str] = "J/mol"
+    SIZE_NULL: ClassVar[float] = 0.0
     FIT_INFO: ClassVar[dict[str, tuple]] = {"activation_energy": ("log", "J/mol")}
 
     base: AbstractCableModel
@@ -204,6 +205,7 @@ class TemperatureShiftWLF(AbstractTemperatureShift):
     EFFECT_FIELDS: ClassVar[tuple[str, ...]] = ("c1", "c2")
     SIZE_FIELD: ClassVar[str] = "c1"
     SIZE_UNIT: ClassVar[str] = "-"
+    SIZE_NULL: ClassVar[float] = 0.0
     FIT_INFO: ClassVar[dict[str, tuple]] = {"c1": ("log", "-"), "c2": ("log", "K")}
 
     base: AbstractCableModel
