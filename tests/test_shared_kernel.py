@@ -112,3 +112,30 @@ def test_a_diagnosis_traces_the_fit_kernel_at_most_once(monkeypatch):
     d = jc.diagnose(data)
     assert len([c for c in d.candidates if c.applicable]) >= 5
     assert len(traces) <= 1, f"the fit kernel was traced {len(traces)} times"
+
+
+def test_switched_off_layers_have_the_base_gradient_under_an_elongation_drive():
+    """E_k = inf (SecondRetardation off) once made every tangent of the elongation
+    drive NaN (inf times the zero tangent of the cable's area in the Newton solve's
+    implicit derivative); every layer off must give the base's gradient."""
+    import equinox as eqx
+    import jax
+    import jax.numpy as jnp
+
+    cable = jc.Cable(length=0.3, diameter=3e-3)
+    t = np.linspace(0.0, 60.0, 40)
+    e = np.minimum(t / 20.0, 1.0) * 1.5e-3
+    stack = stack_of(BURGERS, tuple(jc.EXTENSIONS), ALL)
+    assert "second_retardation" in stack.ids
+
+    def force(model, e1):
+        path = stack.base_prefix + "E1" if model is not BURGERS else "E1"
+        where = lambda m: jc._fit.field_at(m, path)  # noqa: E731
+        moved = eqx.tree_at(where, model, e1)
+        return jc.simulate_elongation_history(moved, cable, t, e).force
+
+    e1 = jnp.asarray(BURGERS.E1)
+    want = jax.jacfwd(lambda x: force(BURGERS, x))(e1)
+    got = jax.jacfwd(lambda x: force(stack.model(BURGERS, None), x))(e1)
+    assert np.all(np.isfinite(got))
+    np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-12 * np.max(np.abs(want)))

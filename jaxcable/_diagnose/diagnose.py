@@ -25,20 +25,23 @@ The workflow:
 
 import dataclasses
 import math
-import warnings
 from collections.abc import Callable, Sequence
 from typing import Literal, NamedTuple
 
 import numpy as np
 
-from .._fit import FitResult, IdentifiabilityWarning, as_test_list, fit_subset, test_id
-from .._fit.parameters import declared_parameters
+from .._fit import (
+    FitResult,
+    as_test_list,
+    declared_parameters,
+    test_id,
+)
 from .._models import EXTENSIONS, AbstractCableModel, IntegratedModel, identifiable
 from .discovery import describe, discover_term
 from .heldout import Fold, splits, with_mask
 from .result import MAX_DELTA_BIC, MIN_GAIN_PCT, MIN_SIZE_Z, Candidate, Diagnosis
 from .scoring import Scoring, noise_floor, scoring
-from .stack import Stack, stack_of
+from .stack import stack_fitter, stack_of
 from .structure import residual_structure
 from .verdict import decide
 
@@ -171,40 +174,6 @@ def _score(
         int(n_train),
         results,
     )
-
-
-def _stack_fitter(stack: Stack, how: Scoring, base_model, **options):
-    """`fitter(active, multistart=1)`: the `fitter` of `_score` for the base (`active`
-    None) or a candidate, every one through the stack's one compiled kernel (a layout per
-    number of training tests)."""
-    layouts: dict[int, object] = {}
-
-    def layout(tests, drives):
-        if len(tests) not in layouts:
-            layouts[len(tests)] = stack.layout(base_model, tests, drives)
-        return layouts[len(tests)]
-
-    def fitter(active, multistart=1):
-        def run(start, tests, index):
-            drives = [how.drives[i] for i in index]
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", IdentifiabilityWarning)
-                raw = fit_subset(
-                    start,
-                    tests,
-                    layout(tests, drives),
-                    stack.free(active),
-                    size=stack.size,
-                    throw=False,
-                    drive=drives,
-                    multistart=multistart,
-                    **options,
-                )
-            return stack.result_of(raw, active), raw.model
-
-        return run
-
-    return fitter
 
 
 def _check_arguments(tests, model, ids, split, holdout, k) -> None:
@@ -355,7 +324,7 @@ def diagnose(
     # The base and every candidate are one model, each fit a choice of free
     # parameters: one compiled kernel (and one simulation) serves them all.
     stack = stack_of(model, [i for i in ids if not reasons[i]], names)
-    fitter = _stack_fitter(stack, how, model, max_steps=max_steps, key=key)
+    fitter = stack_fitter(stack, how, model, max_steps=max_steps, key=key)
 
     say(f"fitting the base model {type(model).__name__}")
     base = _score(

@@ -12,11 +12,17 @@ layers change nothing.
 """
 
 import dataclasses
+import warnings
 
 import equinox as eqx
 
-from .._fit import FitResult, fit_subset, shared_layout
-from .._fit.parameters import field_at
+from .._fit import (
+    FitResult,
+    IdentifiabilityWarning,
+    field_at,
+    fit_subset,
+    shared_layout,
+)
 from .._models import EXTENSIONS, AbstractCableModel
 
 
@@ -124,3 +130,37 @@ def stack_of(base: AbstractCableModel, ids, base_names) -> Stack:
             continue
         usable.append(ext_id)
     return Stack(tuple(usable), tuple(base_names))
+
+
+def stack_fitter(stack: Stack, how, base_model, **options):
+    """`fitter(active, multistart=1)`: the `fitter` of `_score` for the base (`active`
+    None) or a candidate, every one through the stack's one compiled kernel (a layout per
+    number of training tests)."""
+    layouts: dict[int, object] = {}
+
+    def layout(tests, drives):
+        if len(tests) not in layouts:
+            layouts[len(tests)] = stack.layout(base_model, tests, drives)
+        return layouts[len(tests)]
+
+    def fitter(active, multistart=1):
+        def run(start, tests, index):
+            drives = [how.drives[i] for i in index]
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", IdentifiabilityWarning)
+                raw = fit_subset(
+                    start,
+                    tests,
+                    layout(tests, drives),
+                    stack.free(active),
+                    size=stack.size,
+                    throw=False,
+                    drive=drives,
+                    multistart=multistart,
+                    **options,
+                )
+            return stack.result_of(raw, active), raw.model
+
+        return run
+
+    return fitter

@@ -7,6 +7,7 @@ from .data import (
 )
 from .exported import cached_fit_kernels as cached_fit_kernels
 from .fit import fit as fit
+from .parameters import declared_parameters as declared_parameters, field_at as field_at
 from .problem import (
     make_loss as make_loss,
     make_problem as make_problem,

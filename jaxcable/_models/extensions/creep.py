@@ -287,7 +287,12 @@ class SecondRetardation(AbstractExtension[SecondRetardationState]):
     ) -> tuple[SecondRetardationState, StrainParts]:
         base_state, parts = self.base.advance(state.base, cable, dt, force, direction)
         x = dt / self.tau_k
-        compliance = 1.0 / (self.E_k * cable.area)  # 0 for E_k = inf
+        # 0 for E_k = inf, with tangents 0 too: inf times a zero tangent of the
+        # area (the elongation drive's implicit derivative carries one) is NaN.
+        off = jnp.isinf(self.E_k)
+        compliance = jnp.where(
+            off, 0.0, 1.0 / (jnp.where(off, 1.0, self.E_k) * cable.area)
+        )
         strain = jnp.exp(-x) * state.strain + compliance * (
             -state.force * jnp.expm1(-x) + (force - state.force) * ramp_factor(x)
         )
