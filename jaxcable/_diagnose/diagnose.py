@@ -32,6 +32,7 @@ import numpy as np
 
 from .._fit import (
     FitResult,
+    LevenbergMarquardt,
     as_test_list,
     declared_parameters,
     test_id,
@@ -44,6 +45,14 @@ from .scoring import Scoring, noise_floor, scoring
 from .stack import stack_fitter, stack_of
 from .structure import residual_structure
 from .verdict import decide
+
+
+# The fits stop when an accepted step lowers the sum of squares by less than FTOL of
+# it (`LevenbergMarquardt.ftol`): a candidate the data do not show otherwise may
+# drift along a flat valley to `max_steps` (bedding-in on the bundled data: 23 or 256
+# steps from run to run, as multi-threaded rounding picks the path; 256 steps are
+# most of a diagnosis's time).
+FTOL = 1e-8
 
 
 class _Score(NamedTuple):
@@ -324,7 +333,10 @@ def diagnose(
     # The base and every candidate are one model, each fit a choice of free
     # parameters: one compiled kernel (and one simulation) serves them all.
     stack = stack_of(model, [i for i in ids if not reasons[i]], names)
-    fitter = stack_fitter(stack, how, model, max_steps=max_steps, key=key)
+    solver = LevenbergMarquardt(rtol=1e-6, atol=1e-6, ftol=FTOL)
+    fitter = stack_fitter(
+        stack, how, model, max_steps=max_steps, key=key, solver=solver
+    )
 
     say(f"fitting the base model {type(model).__name__}")
     base = _score(

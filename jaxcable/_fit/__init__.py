@@ -16,5 +16,8 @@ from .problem import (
 from .responses import model_responses as model_responses
 from .result import FitResult as FitResult
 from .shared import fit_subset as fit_subset, shared_layout as shared_layout
-from .solver import residuals_and_jacobian as residuals_and_jacobian
+from .solver import (
+    LevenbergMarquardt as LevenbergMarquardt,
+    residuals_and_jacobian as residuals_and_jacobian,
+)
 from .statistics import IdentifiabilityWarning as IdentifiabilityWarning

@@ -72,6 +72,7 @@ def fit_subset(
     throw: bool = True,
     drive="auto",
     covariate: str | None = None,
+    solver=None,
 ) -> FitResult:
     """[`jaxcable.fit`][] of the parameters `free` of `model`, through the kernel of
     `layout`: every call with the same model structure, layout, `size`, settings and
@@ -82,7 +83,7 @@ def fit_subset(
     - `model`: the model and its start values (the structure `layout` was made for;
         the parameters not in `free` keep their values, inf included).
     - `tests`, `max_steps`, `multistart`, `spread`, `key`, `throw`, `drive`,
-        `covariate`: as in [`jaxcable.fit`][].
+        `covariate`, `solver`: as in [`jaxcable.fit`][].
     - `layout`: from [`shared_layout`][].
     - `free`: the parameters to fit, a subset of `layout.names`.
     - `size`: the length of the solver's vector, >= len(free): the same for every
@@ -99,7 +100,7 @@ def fit_subset(
     `size` too small, a log-scaled start not positive, `model` of another structure
     or failing its domain check, fewer fitted samples than parameters.
     """
-    solver = _checked_solver(multistart, max_steps, spread, None)
+    solver = _checked_solver(multistart, max_steps, spread, solver)
     test_list = as_test_list(tests)
     free = tuple(free)
     unknown = [n for n in free if n not in layout.names]
