@@ -354,13 +354,19 @@ def _fitted_info(model, name: str, table: dict, per: tuple[str, ...]) -> Paramet
     return info
 
 
-def _start(model, layout: Layout) -> tuple[np.ndarray, np.ndarray]:
-    """The scales of the `"linear"` transforms and the unconstrained start u."""
+def _start(
+    model, layout: Layout, only: Sequence[str] | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """The scales of the `"linear"` transforms and the unconstrained start u (of the
+    names in `only`, when given: the others get scale 1 and u = 0, a placeholder)."""
     scales = np.ones(len(layout.names))
     start = []
     for i, (name, transform, size) in enumerate(
         zip(layout.names, layout.transforms, layout.sizes)
     ):
+        if only is not None and name not in only:
+            start += [0.0] * size
+            continue
         value = float(field_at(model, name))
         scales[i] = abs(value) if value != 0 else 1.0
         other = bound_of(transform)

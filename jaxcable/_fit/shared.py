@@ -25,8 +25,8 @@ from .._models import AbstractCableModel
 from .data import as_test_list, pad_tests
 from .exported import current_fit_kernel
 from .fit import _checked_solver, _require_valid_start, fit_result
-from .parameters import Layout, bound_of, field_at, to_unconstrained
-from .problem import Problem, _checked_model, make_problem
+from .parameters import Layout, field_at
+from .problem import Problem, _checked_model, _start, make_problem
 from .result import FitResult
 
 
@@ -124,21 +124,16 @@ def fit_subset(
     # and another weak type would be another program.
     params = jax.tree.map(lambda x: jnp.asarray(x, x.dtype), params)
     p = layout.size
-    scales, fixed, mask = np.ones(p), np.zeros(p), np.zeros(p, bool)
     order = [i for i, name in enumerate(layout.names) if name in free]
     for i in order:
-        name, transform = layout.names[i], layout.transforms[i]
-        value = float(field_at(model, name))
-        if transform == "log" and not value > 0:
+        name, value = layout.names[i], float(field_at(model, layout.names[i]))
+        if layout.transforms[i] == "log" and not value > 0:
             raise ValueError(
                 f"`model.{name}` = {value} is fitted on a log scale and must start "
                 "positive."
             )
-        scales[i] = abs(value) if value != 0 else 1.0
-        other = bound_of(transform)
-        bound = None if other is None else float(field_at(model, other))
-        fixed[i] = to_unconstrained(transform, value, scales[i], bound)
-        mask[i] = True
+    scales, fixed = _start(model, layout, only=free)
+    mask = np.isin(np.arange(p), order)
     n = int(np.asarray(data.weight).sum())
     if n <= len(order):
         raise ValueError(
