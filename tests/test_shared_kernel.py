@@ -139,3 +139,9 @@ def test_switched_off_layers_have_the_base_gradient_under_an_elongation_drive():
     got = jax.jacfwd(lambda x: force(stack.model(BURGERS, None), x))(e1)
     assert np.all(np.isfinite(got))
     np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-12 * np.max(np.abs(want)))
+
+
+def test_a_model_without_the_layouts_parameters_is_rejected(tests):
+    layout = shared_layout(BURGERS, tests, ALL, drive="force")
+    with pytest.raises(ValueError, match="model"):
+        fit_subset(jc.HookeModel(), tests, layout, ("E1",), size=4, drive="force")

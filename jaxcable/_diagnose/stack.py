@@ -78,13 +78,18 @@ class Stack:
         union = tuple(dict.fromkeys(n for i in (None, *self.ids) for n in self.free(i)))
         return shared_layout(self.model(base, "all"), tests, union, drive=drive)
 
-    def fit(self, start, tests, layout, active, **kwargs) -> FitResult:
-        """Fit `start` (a stack) with the parameters of `active` free; the result as
-        the base's or the candidate's own (see `result_of`)."""
-        result = fit_subset(
+    def fit_stacked(self, start, tests, layout, active, **kwargs) -> FitResult:
+        """Fit `start` (a stack) with the parameters of `active` free: the result
+        with the stack's model and paths."""
+        return fit_subset(
             start, tests, layout, self.free(active), size=self.size, **kwargs
         )
-        return self.result_of(result, active)
+
+    def fit(self, start, tests, layout, active, **kwargs) -> FitResult:
+        """`fit_stacked`, the result as the base's or the candidate's own (see
+        `result_of`)."""
+        stacked = self.fit_stacked(start, tests, layout, active, **kwargs)
+        return self.result_of(stacked, active)
 
     def own_model(self, stack: AbstractCableModel, active: str | None):
         """The base model (`active` None) or the candidate's extension around it,
@@ -148,12 +153,11 @@ def stack_fitter(stack: Stack, how, base_model, **options):
             drives = [how.drives[i] for i in index]
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", IdentifiabilityWarning)
-                raw = fit_subset(
+                raw = stack.fit_stacked(
                     start,
                     tests,
                     layout(tests, drives),
-                    stack.free(active),
-                    size=stack.size,
+                    active,
                     throw=False,
                     drive=drives,
                     multistart=multistart,

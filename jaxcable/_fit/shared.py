@@ -25,7 +25,7 @@ from .._models import AbstractCableModel
 from .data import as_test_list, pad_tests
 from .exported import current_fit_kernel
 from .fit import _checked_solver, _require_valid_start, fit_result
-from .parameters import Layout, field_at
+from .parameters import Layout, declared_parameters, field_at
 from .problem import Problem, _checked_model, _start, make_problem
 from .result import FitResult
 
@@ -97,8 +97,8 @@ def fit_subset(
     **Raises:**
 
     `ValueError` naming the argument: a name of `free` not in the layout or repeated,
-    `size` too small, a log-scaled start not positive, `model` of another structure
-    or failing its domain check, fewer fitted samples than parameters.
+    `size` too small, a log-scaled start not positive, `model` without the layout's
+    parameters or failing its domain check, fewer fitted samples than parameters.
     """
     solver = _checked_solver(multistart, max_steps, spread, solver)
     test_list = as_test_list(tests)
@@ -117,6 +117,12 @@ def fit_subset(
     if data.num_tests != layout.num_tests:
         raise ValueError(
             f"`tests`: {data.num_tests} tests for a layout of {layout.num_tests}."
+        )
+    missing = [n for n in layout.names if n not in declared_parameters(model)]
+    if missing:
+        raise ValueError(
+            f"`model`: a {type(model).__name__} has no parameters {missing} of the "
+            "layout; give the model the layout was made for."
         )
     _checked_model(model, data, test_list)
     params, static = eqx.partition(model, eqx.is_inexact_array)
