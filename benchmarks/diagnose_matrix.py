@@ -156,6 +156,7 @@ def run(effect, seed, size):
         "explained_pct": {c.id: c.explained_pct for c in d.candidates},
         "effect_value": d.effect.get("value"),
         "effect_stderr": d.effect.get("stderr"),
+        "discovered_equation": (d.discovered or {}).get("equation"),
     }
 
 

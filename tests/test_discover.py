@@ -160,3 +160,19 @@ def test_diagnosis_discovers_the_term_the_catalogue_lacks(hidden):
     document = d.to_dict()
     assert document["discovered"]["equation"].startswith("d(eps)/dt = ")
     assert [c["id"] for c in document["candidates"]] == ["discovered"]
+
+
+def test_discover_finds_cyclic_softening_without_a_covariate():
+    """A compliance that grows with the load cycles (strain theta sigma N_cyc, the
+    braid's abrasion) hidden in a cycling Burgers cable, no covariate recorded: the
+    library's d(sigma N_cyc)/dt is found with its coefficient."""
+    theta = 1e-11  # 1/Pa: ~1e-3 strain after the six cycles at 100 N
+    true = jc.DiscoveredTerm(BASE, terms=("sigma_cycles_rate",), theta0=theta)
+    tests = _tests(true, covariate=False)
+    base_fit = jc.fit(BASE, _train(tests), fit=BASE_FIT, drive="force", multistart=1)
+    found = jc.discover(base_fit, tests)
+    assert "sigma_cycles_rate" in found.terms, found.path
+    k = found.terms.index("sigma_cycles_rate")
+    assert abs(found.values[k] - theta) <= 3 * found.stderr[k], found.equation
+    assert "1/Pa * d(sigma N_cyc)/dt" in found.equation
+    assert found.gain_pct > 50, found.heldout_rmse_mm

@@ -36,6 +36,8 @@ TERMS: dict[str, tuple[str, str]] = {
     "time_loaded": ("t_load", "s"),
     "time_rest": ("t_rest", "s"),
     "cycles": ("N_cyc", "-"),
+    "sigma_sq": ("sigma^2", "Pa^2"),
+    "sigma_cycles_rate": ("d(sigma N_cyc)/dt", "Pa/s"),
     "c": ("c", "c"),
     "c_rate": ("dc/dt", "c/s"),
     "c_abs_rate": ("|dc/dt|", "c/s"),
@@ -87,6 +89,8 @@ def term_increments(
         "time_loaded": mean(loaded0, loaded1),
         "time_rest": mean(rest0, rest1),
         "cycles": mean(cycles0, cycles1),
+        "sigma_sq": mean(sigma0**2, sigma1**2),
+        "sigma_cycles_rate": sigma1 * cycles1 - sigma0 * cycles0,
         "c": mean(c0, c1),
         "c_rate": c1 - c0,
         "c_abs_rate": abs_dc,
@@ -145,12 +149,16 @@ class DiscoveredTerm(AbstractExtension[DiscoveredTermState]):
     | `time_loaded` | time under load so far | s | 1/s^2 |
     | `time_rest` | time not under load so far | s | 1/s^2 |
     | `cycles` | equivalent load cycles, total variation of F / (2 max F) | - | 1/s |
+    | `sigma_sq` | sigma^2 (creep faster than linear in stress) | Pa^2 | 1/(Pa^2 s) |
+    | `sigma_cycles_rate` | d(sigma N_cyc)/dt (a compliance growing with cycles) | Pa/s | 1/Pa |
     | `c` | the covariate c (`Cable.covariate`) | c | 1/(c s) |
     | `c_rate`, `c_abs_rate` | dc/dt, abs(dc/dt) | c/s | 1/c |
     | `sigma_c` | sigma c | Pa c | 1/(Pa c s) |
     | `sigma_c_abs_rate` | sigma abs(dc/dt) (mechano-sorptive creep) | Pa c/s | 1/(Pa c) |
 
-    where c is in the unit of the recorded covariate column (the fit sets
+    `sigma_cycles_rate` integrates to theta sigma N_cyc: a strain that grows with
+    the load cycles, as the compliance of a braid abraded cycle after cycle.
+    Where c is in the unit of the recorded covariate column (the fit sets
     `Cable.covariate` per sample from `jaxcable.fit(..., covariate=NAME)`). Over a
     step the terms are integrated as [`term_increments`][] says (rates exactly,
     others by the trapezoid rule); time under load is the base's continuous tension
@@ -160,7 +168,7 @@ class DiscoveredTerm(AbstractExtension[DiscoveredTermState]):
 
     **Continuity.** The increment is linear in the thetas and Lipschitz in the force
     and covariate samples, except that the absolute-rate terms (`sigma_abs_rate`,
-    `c_abs_rate`, `sigma_c_abs_rate`) and `cycles` accumulate the total variation of
+    `c_abs_rate`, `sigma_c_abs_rate`), `cycles` and `sigma_cycles_rate` accumulate the total variation of
     their signal: noise on it adds theta x its total variation. The discovery keeps
     such a term only when it predicts held-out data.
 
