@@ -187,6 +187,7 @@ class RateDrive(AbstractDrive):
             return jnp.where(branch != 0, jump, duration)
 
         guess = jax.lax.cond(sample.continues, lambda: state.last_step, first_guess)
+        limit = strain_limit(model)
         # Along a loading ramp the crosshead overtakes the model strain (slope < 0 at
         # the root); along an unloading ramp the other way round; a hold is linear in
         # dt.
@@ -208,6 +209,15 @@ class RateDrive(AbstractDrive):
             slope_sign=slope_sign,
             growth=1e-6 / cable.strain_rate,
             active=_active(state, sample),
+            # On a ramp, beyond a crosshead travel of twice the model's strain
+            # limit no root is physical (a root below it but past the limit is
+            # flagged `nonphysical_strain` below); a hold's time is its duration.
+            # Infinite without a limit.
+            upper=jnp.where(
+                branch != 0,
+                (2 * limit + jnp.abs(state.strain)) / cable.strain_rate,
+                jnp.inf,
+            ),
         )
         dt = checkpoint_name(root.value, SOLUTION)
         model_state, parts = model.advance(state.model_state, cable, dt, force, branch)
@@ -218,7 +228,7 @@ class RateDrive(AbstractDrive):
             unreachable=root.no_root,
             dt=dt,
         )
-        result = solved_result(result, parts.total, strain_limit(model))
+        result = solved_result(result, parts.total, limit)
         return commit(
             state, model_state, parts, state.time + dt, force, result, sample.mask
         )

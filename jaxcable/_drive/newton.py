@@ -173,8 +173,9 @@ def root_scalar(
     slope_sign: Float[Array, ""] | None = None,
     growth: Float[Array, ""] | None = None,
     active: Bool[Array, ""] | None = None,
+    upper: Float[Array, ""] | None = None,
 ) -> RootResult:
-    """Solve fn(y, args) = 0 for a scalar y >= lower.
+    """Solve fn(y, args) = 0 for a scalar lower <= y <= upper.
 
     `slope_sign` (+1 or -1), where known, is the sign of fn's slope at the wanted
     root. Where the slope at an iterate has the other sign (or is zero), the root
@@ -195,6 +196,14 @@ def root_scalar(
     verdict on 10^5 random cables against a denser scan of the residual. The search
     and the bisection share one loop after Newton's, which a batch whose solves all
     converged enters for one predicate only.
+
+    `upper` (default: none) bounds the iterates and the search: beyond it fn is
+    outside the model's domain (e.g. a rate-driven strain far past the hardening
+    law's limit, where its arithmetic overflows), so a sign change there is no root
+    and a solve whose root lies beyond it ends with `no_root`, the same verdict on
+    every platform instead of one that depends on rounding at strains of 1e8
+    (measured: a force out of reach was `unreachable_force` or `newton_failed`
+    depending on LLVM's optimisation level). jaxcable's `Newton` only.
 
     `active` (default: all) marks the lanes to solve: a lane that is not active
     (a cable that has already failed, under `vmap`) takes the unrolled steps only,
@@ -226,6 +235,7 @@ def root_scalar(
 
     tol = solver.tol
     live = jnp.ones_like(guess, dtype=bool) if active is None else active
+    top = jnp.inf if upper is None else upper
 
     def newton_step(y, r, slope):
         # The next iterate from the residual `r` and the `slope` at `y`.
@@ -248,7 +258,7 @@ def root_scalar(
         small = 1e-3 * jnp.abs(y) + (0.0 if growth is None else 1e3 * growth)
         refine = ok & (jnp.abs(step) <= small)
         y_new = jnp.where(jnp.abs(r) <= tol, jnp.where(refine, y - step, y), y_new)
-        y_new = jnp.maximum(y_new, lower)
+        y_new = jnp.minimum(jnp.maximum(y_new, lower), top)
         # At `lower` and already past the root (or, without `slope_sign`, stepping
         # below `lower` again), the root is below `lower`: stop instead of
         # repeating the step.
@@ -300,7 +310,7 @@ def root_scalar(
             # 2**k in the iterate's dtype: under x64, a float32 solve would
             # otherwise get float64 iterates (2.0**k of an int is float64 there).
             y_search = lower + growth * ((2.0**s.k).astype(y.dtype) - 1.0)
-            y = jnp.where(s.phase == _SEARCH, y_search, y)
+            y = jnp.where(s.phase == _SEARCH, jnp.minimum(y_search, top), y)
         r = f(y)
         s = eqx.tree_at(
             lambda s: (s.bracket, s.k, s.y_end, s.r_end),
