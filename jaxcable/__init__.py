@@ -54,6 +54,7 @@ from ._io import (
     write_csv as write_csv,
 )
 from ._models import (
+    COVARIATE_EXTENSIONS as COVARIATE_EXTENSIONS,
     EXTENSIONS as EXTENSIONS,
     PIAO_TABLE3 as PIAO_TABLE3,
     AbstractCableModel as AbstractCableModel,
@@ -64,6 +65,9 @@ from ._models import (
     BoucWenState as BoucWenState,
     BurgersModel as BurgersModel,
     BurgersState as BurgersState,
+    CovariateShift as CovariateShift,
+    CovariateStrain as CovariateStrain,
+    CovariateStrainState as CovariateStrainState,
     DiscoveredTerm as DiscoveredTerm,
     DiscoveredTermState as DiscoveredTermState,
     FiveElementModel as FiveElementModel,
@@ -74,6 +78,8 @@ from ._models import (
     HookeState as HookeState,
     IntegratedModel as IntegratedModel,
     IntegratedState as IntegratedState,
+    MechanoSorptive as MechanoSorptive,
+    MechanoSorptiveState as MechanoSorptiveState,
     ParameterSurface as ParameterSurface,
     SecondRetardation as SecondRetardation,
     SecondRetardationState as SecondRetardationState,

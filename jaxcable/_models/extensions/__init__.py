@@ -3,7 +3,8 @@
 composable by nesting, e.g. `SensorDrift(BeddingIn(IntegratedModel()))`.
 
 By family: `creep.py` (the base's creep changed), `temperature.py` (the base on
-reduced time) and `apparatus.py` (what the test set-up adds). [`EXTENSIONS`][] lists
+reduced time), `apparatus.py` (what the test set-up adds) and `covariate.py` (what a
+recorded covariate drives). [`EXTENSIONS`][] lists
 the candidates of the diagnosis.
 
 At the null value of its effect parameter (`weight = 0`, `E_k = inf`, `n = 0`,
@@ -25,6 +26,13 @@ from .apparatus import (
     SensorDrift as SensorDrift,
     SensorDriftState as SensorDriftState,
     TerminationCompliance as TerminationCompliance,
+)
+from .covariate import (
+    CovariateShift as CovariateShift,
+    CovariateStrain as CovariateStrain,
+    CovariateStrainState as CovariateStrainState,
+    MechanoSorptive as MechanoSorptive,
+    MechanoSorptiveState as MechanoSorptiveState,
 )
 from .creep import (
     Hereditary as Hereditary,
@@ -63,3 +71,11 @@ EXTENSIONS: dict[str, type[AbstractExtension]] = {
 """The candidate extensions of the diagnosis, id -> class, in a fixed order: creep
 changes first, then temperature, then the apparatus. ([`DiscoveredTerm`][], id
 `discovered`, is not a catalogue candidate: the discovery builds its terms.)"""
+
+COVARIATE_EXTENSIONS: dict[str, type[AbstractExtension]] = {
+    cls.EXTENSION_ID: cls for cls in (CovariateStrain, MechanoSorptive, CovariateShift)
+}
+"""The extensions driven by a recorded covariate (`Cable.covariate`, set from a
+column by `jaxcable.fit(..., covariate=NAME)`), id -> class: a strain proportional to
+it, creep driven by its changes under stress, a time shift by it. Not in
+[`EXTENSIONS`][]: the catalogue's candidates run on data without a covariate."""
