@@ -152,6 +152,13 @@ def run(effect, seed, size):
             if gains.get("discovered") is None or true_gain <= 0
             else gains["discovered"] / true_gain
         ),
+        # The named candidate's held-out gain over the true one (a covariate's
+        # extension or the discovered term, where one is named).
+        "named_share_of_true_gain": (
+            None
+            if gains.get(d.named_cause) is None or true_gain <= 0
+            else gains[d.named_cause] / true_gain
+        ),
         "gains": gains,
         "explained_pct": {c.id: c.explained_pct for c in d.candidates},
         "effect_value": d.effect.get("value"),
@@ -311,7 +318,8 @@ def main(argv=None):
             + (
                 f", no wrong catalogue cause {r['no_wrong_catalogue_cause']}/"
                 f"{r['seeds']}, true gain {r['true_gain_pct']:.0f} %, discovered "
-                f">= 50 % of it {r['discovered_half_true_gain']}/{r['seeds']}"
+                f">= 50 % of it {r['discovered_half_true_gain']}/{r['seeds']}, "
+                f"named >= 50 % of it {r['named_half_true_gain']}/{r['seeds']}"
                 + (
                     ""
                     if r["covariate_named"] is None
@@ -348,6 +356,13 @@ def _outside_counts(sel) -> dict:
         ),
         "discovered_half_true_gain": int(
             sum(x is not None and bool(x >= 0.5) for x in share)
+        ),
+        "named_half_true_gain": int(
+            sum(
+                r["named_share_of_true_gain"] is not None
+                and bool(r["named_share_of_true_gain"] >= 0.5)
+                for r in sel
+            )
         ),
     }
 

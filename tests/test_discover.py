@@ -176,3 +176,38 @@ def test_discover_finds_cyclic_softening_without_a_covariate():
     assert abs(found.values[k] - theta) <= 3 * found.stderr[k], found.equation
     assert "1/Pa * d(sigma N_cyc)/dt" in found.equation
     assert found.gain_pct > 50, found.heldout_rmse_mm
+
+
+def test_diagnosis_names_the_covariate_form_and_its_column(hidden):
+    """With the covariates' extensions among the candidates, the hidden
+    mechano-sorptive creep is named as that form of the recorded column, with its
+    coefficient; without a covariate column they are not tried."""
+    true = hidden[0]
+    tests = _tests(true, samples=600)
+    d = jc.diagnose(
+        tests,
+        BASE,
+        fit_names=BASE_FIT,
+        candidates=list(jc.COVARIATE_EXTENSIONS),
+        drive="force",
+        discover=False,
+    )
+    assert d.named_cause == "mechano_sorptive[humidity]", d.summary()
+    named = next(c for c in d.candidates if c.id == d.named_cause)
+    assert abs(named.size - THETA) <= 3 * named.size_stderr, d.summary()
+    assert named.size_unit == "1/(Pa [humidity])"
+    assert {c.id for c in d.candidates} == {
+        f"{i}[humidity]" for i in jc.COVARIATE_EXTENSIONS
+    }
+    bare = [
+        jc.TestData(t.time, t.force, t.elongation, metadata=t.metadata) for t in tests
+    ]
+    d = jc.diagnose(
+        bare,
+        BASE,
+        fit_names=BASE_FIT,
+        candidates=["mechano_sorptive"],
+        drive="force",
+        discover=False,
+    )
+    assert len(d.candidates) == 0 and "mechano" not in d.named_cause

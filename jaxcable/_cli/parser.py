@@ -350,7 +350,9 @@ def build_parser() -> argparse.ArgumentParser:
     how.add_argument(
         "--candidates",
         metavar="IDS",
-        help="comma-separated extension ids to try (default: all seven)",
+        help="comma-separated extension ids to try (default: the seven of the "
+        "catalogue, and covariate_strain, mechano_sorptive and covariate_shift for "
+        "each extra column every test records)",
     )
     how.add_argument(
         "--split",

@@ -37,11 +37,18 @@ from .._fit import (
     declared_parameters,
     test_id,
 )
-from .._models import EXTENSIONS, AbstractCableModel, IntegratedModel, identifiable
+from .._models import (
+    COVARIATE_EXTENSIONS,
+    EXTENSIONS,
+    AbstractCableModel,
+    IntegratedModel,
+    identifiable,
+)
+from .covariates import covariate_candidates
 from .discovery import describe, discover_term
 from .heldout import Fold, splits, with_mask
 from .result import MAX_DELTA_BIC, MIN_GAIN_PCT, MIN_SIZE_Z, Candidate, Diagnosis
-from .scoring import Scoring, noise_floor, scoring
+from .scoring import Scoring, bic, fitted_candidate, noise_floor, scoring
 from .stack import stack_fitter, stack_of
 from .structure import residual_structure
 from .verdict import decide
@@ -66,51 +73,20 @@ class _Score(NamedTuple):
     fits: list[FitResult]
 
 
-def _bic(rmse: float, n: int, p: int, per_unit: float) -> float:
-    """The Bayesian information criterion n ln(SSR / n) + p ln n, SSR in residual
-    units (`rmse` / `per_unit`: per_unit is 1e3 for an RMSE in mm of residuals in m)."""
-    return n * math.log(max((rmse * (1.0 / per_unit)) ** 2, 1e-300)) + p * math.log(n)
-
-
 def _discovered_candidate(
     found, base_heldout: float, bic_base: float, how
 ) -> Candidate:
     """The discovered term scored as a candidate (mm: force-driven tests)."""
-    result = found.fit
-    n = int(np.sum(result.num_samples))
-    train = 1e3 * math.sqrt(result.loss / max(n, 1))
-    held = found.heldout_rmse_mm[1]
-    delta_bic = _bic(train, n, len(result.names), how.factor) - bic_base
     # Its size: the best-determined of its terms (a support may carry a weak
     # companion term, which the forward selection kept for a small held-out gain).
     values, errors = np.asarray(found.values, float), np.asarray(found.stderr, float)
     with np.errstate(divide="ignore", invalid="ignore"):
         zs = np.where(errors > 0, np.abs(values) / errors, np.inf)
     k = int(np.nanargmax(np.where(np.isfinite(values), zs, -1.0)))
-    size, stderr = float(values[k]), float(errors[k])
-    z = abs(size) / stderr if stderr > 0 else (math.inf if size != 0 else 0.0)
-    gain = 100.0 * (base_heldout - held) / base_heldout
-    significant = bool(
-        math.isfinite(held)
-        and gain >= MIN_GAIN_PCT
-        and delta_bic <= MAX_DELTA_BIC
-        and z >= MIN_SIZE_Z
-    )
-    return Candidate(
-        "discovered",
-        held,
-        gain,
-        train,
-        delta_bic,
-        size,
-        stderr,
-        found.units[k],
-        f"theta{k} ({found.terms[k]})",
-        significant,
-        True,
-        found.equation,
-        result,
-        how.unit,
+    size = (values[k], errors[k], found.units[k], f"theta{k} ({found.terms[k]})")
+    held = found.heldout_rmse_mm[1]
+    return fitted_candidate(
+        "discovered", found.fit, held, size, found.equation, base_heldout, bic_base, how
     )
 
 
@@ -191,11 +167,10 @@ def _check_arguments(tests, model, ids, split, holdout, k) -> None:
         raise ValueError(
             f"`model` must be a jaxcable model, got {type(model).__name__}."
         )
-    unknown = [c for c in ids if c not in EXTENSIONS]
+    known = [*EXTENSIONS, *COVARIATE_EXTENSIONS]
+    unknown = [c for c in ids if c not in known]
     if unknown:
-        raise ValueError(
-            f"`candidates` names {unknown}; known extensions: {list(EXTENSIONS)}."
-        )
+        raise ValueError(f"`candidates` names {unknown}; known extensions: {known}.")
     if split not in ("time", "tests"):
         raise ValueError(f"`split` must be 'time' or 'tests', got {split!r}.")
     if not (isinstance(holdout, (int, float)) and 0.0 < holdout <= 0.9):
@@ -273,7 +248,10 @@ def diagnose(
     - `fit_names`: the base parameters to fit (default: the model's identifiable
         parameters in the model registry, for the integrated model Park's eight of
         `PARK_IDENTIFIABLE`; else all).
-    - `candidates`: extension ids to try (default: all of [`jaxcable.EXTENSIONS`][]).
+    - `candidates`: extension ids to try (default: all of [`jaxcable.EXTENSIONS`][]
+        and of [`jaxcable.COVARIATE_EXTENSIONS`][]; the latter are tried for each
+        extra column every test records, on the time split of force-driven tests,
+        with ids such as `mechano_sorptive[humidity_pct]`).
     - `split`: `"time"`: a blocked time split, the last `holdout` fraction of every
         test's samples held out (the model still runs through them; they are not
         fitted). `"tests"`: k-fold cross-validation over whole tests (test i is in
@@ -302,9 +280,12 @@ def diagnose(
     tests = as_test_list(tests)
     if model is None:
         model = IntegratedModel()
-    ids = list(EXTENSIONS) if candidates is None else list(candidates)
+    ids = [*EXTENSIONS, *COVARIATE_EXTENSIONS] if candidates is None else [*candidates]
     k = len(tests) if folds is None else folds
     _check_arguments(tests, model, ids, split, holdout, k)
+    # The covariates' extensions are fitted apart, on the time split (below).
+    covariate_ids = [i for i in ids if i in COVARIATE_EXTENSIONS]
+    ids = [i for i in ids if i in EXTENSIONS]
     tests = [
         t
         if getattr(t, "mask", None) is not None
@@ -351,7 +332,7 @@ def diagnose(
         raise RuntimeError(
             f"jaxcable.diagnose: the base model's fit failed ({base_fit.message})."
         )
-    bic_base = _bic(base.train_rmse, base.num_train, len(base_fit.names), how.factor)
+    bic_base = bic(base.train_rmse, base.num_train, len(base_fit.names), how.factor)
 
     # The base's residuals over whole tests in their scored channels, for the
     # structure analysis.
@@ -392,7 +373,7 @@ def diagnose(
         held = scored.heldout_rmse
         gain = 100.0 * (base.heldout_rmse - held) / base.heldout_rmse
         delta_bic = (
-            _bic(scored.train_rmse, scored.num_train, len(result.names), how.factor)
+            bic(scored.train_rmse, scored.num_train, len(result.names), how.factor)
             - bic_base
         )
         z = abs(size) / stderr if stderr > 0 else (math.inf if size != 0 else 0.0)
@@ -421,6 +402,18 @@ def diagnose(
             )
         )
 
+    if split == "time" and how.unit == "mm":
+        out += covariate_candidates(
+            base_fit,
+            tests,
+            covariate_ids,
+            holdout=holdout,
+            base_heldout=base.heldout_rmse,
+            bic_base=bic_base,
+            how=how,
+            max_steps=max_steps,
+            say=say,
+        )
     noise = noise_floor(tests, how)
 
     def verdict_on(candidates):

@@ -141,7 +141,7 @@ def library(test, covariate: str | None, names=tuple(TERMS)) -> dict[str, np.nda
     return {k: np.cumsum(np.asarray(increments[k], float)) for k in names}
 
 
-def _base_start(base_fit: FitResult) -> AbstractCableModel:
+def base_start(base_fit: FitResult) -> AbstractCableModel:
     """The fitted base as a start model (per-test values averaged to scalars)."""
     return jax.tree_util.tree_map(
         lambda x: jnp.mean(x) if eqx.is_inexact_array(x) and x.ndim else x,
@@ -177,7 +177,7 @@ def _sensitivities(base, base_fit: FitResult, tests) -> list[np.ndarray]:
     return [jacobian[i, : len(t.time)] for i, t in enumerate(full)]
 
 
-def _heldout_rmse_mm(model, tests, held, covariate) -> float:
+def heldout_rmse_mm(model, tests, held, covariate) -> float:
     """RMSE over the held-out samples each test's own mask keeps (as the
     diagnosis scores), mm."""
     response = model_responses(model, tests, drive="force", covariate=covariate)
@@ -280,7 +280,7 @@ def discover(
     if unknown:
         raise ValueError(f"`terms` {unknown} are not in the library {list(TERMS)}.")
 
-    base = _base_start(base_fit)
+    base = base_start(base_fit)
     response = model_responses(base, tests, drive="force")
     sensitivity = _sensitivities(base, base_fit, tests)
     rows = []
@@ -351,7 +351,7 @@ def discover(
 
     thetas = dict(zip(THETA_FIELDS, coefficients))
     model = DiscoveredTerm(base, terms=chosen, **thetas) if chosen else base
-    base_rmse = _heldout_rmse_mm(base, tests, held, None)
+    base_rmse = heldout_rmse_mm(base, tests, held, None)
     result, values = None, coefficients
     stderr = np.full(len(chosen), np.nan)
     if chosen and joint_fit:
@@ -374,7 +374,7 @@ def discover(
         values = np.asarray(result.values, float)[index]
         stderr = np.asarray(result.stderr, float)[index]
         model = result.model
-    rmse = _heldout_rmse_mm(model, tests, held, covariate) if chosen else base_rmse
+    rmse = heldout_rmse_mm(model, tests, held, covariate) if chosen else base_rmse
     return DiscoveryResult(
         terms=chosen,
         coefficients=coefficients,

@@ -16,6 +16,7 @@ import numpy as np
 from .._fit import as_test_list, pad_tests, resolve_drives
 from .._io import ControlDetection
 from .elongations import measured_channel, scored_residuals
+from .result import MAX_DELTA_BIC, MIN_GAIN_PCT, MIN_SIZE_Z, Candidate
 
 
 # How a diagnosis reports a residual unit: its name and the factor from the residual
@@ -95,3 +96,69 @@ def noise_floor(tests, scoring: Scoring) -> float:
         if (noise := channel_noise(t, d)) is not None
     ]
     return scoring.factor * float(np.median(values)) if values else float("nan")
+
+
+def bic(rmse: float, n: int, p: int, per_unit: float) -> float:
+    """The Bayesian information criterion n ln(SSR / n) + p ln n, SSR in residual
+    units (`rmse` / `per_unit`: per_unit is 1e3 for an RMSE in mm of residuals in m)."""
+    return n * math.log(max((rmse * (1.0 / per_unit)) ** 2, 1e-300)) + p * math.log(n)
+
+
+def fitted_candidate(
+    candidate_id: str,
+    result,
+    heldout: float,
+    size: tuple[float, float, str, str],
+    note: str,
+    base_heldout: float,
+    bic_base: float,
+    how: Scoring,
+):
+    """A candidate fitted outside the catalogue's stack (a discovered term, a
+    covariate's extension) scored as the catalogue's are: held-out gain, ΔBIC on
+    the training samples, z of its size.
+
+    **Arguments:**
+
+    - `candidate_id`: its id in the diagnosis.
+    - `result`: its [`jaxcable.FitResult`][] on the training samples (force-driven
+        tests: residuals in m).
+    - `heldout`: its held-out RMSE, mm.
+    - `size`: `(value, standard error, unit, name)` of its size parameter.
+    - `note`: what to show beside it (an equation, the covariate).
+    - `base_heldout`, `bic_base`: the base's held-out RMSE (mm) and BIC.
+    - `how`: the diagnosis's [`Scoring`][].
+
+    **Returns:**
+
+    A `Candidate`.
+    """
+    n = int(np.sum(result.num_samples))
+    loss = float(result.loss)
+    train = 1e3 * math.sqrt(loss / max(n, 1)) if math.isfinite(loss) else math.inf
+    delta_bic = bic(train, n, len(result.names), how.factor) - bic_base
+    value, stderr, unit, name = float(size[0]), float(size[1]), size[2], size[3]
+    z = abs(value) / stderr if stderr > 0 else (math.inf if value != 0 else 0.0)
+    gain = 100.0 * (base_heldout - heldout) / base_heldout
+    significant = bool(
+        math.isfinite(heldout)
+        and gain >= MIN_GAIN_PCT
+        and delta_bic <= MAX_DELTA_BIC
+        and z >= MIN_SIZE_Z
+    )
+    return Candidate(
+        candidate_id,
+        heldout,
+        gain,
+        train,
+        delta_bic,
+        value,
+        stderr,
+        unit,
+        name,
+        significant,
+        True,
+        note,
+        result,
+        how.unit,
+    )
