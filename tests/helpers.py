@@ -67,3 +67,17 @@ def asymmetric_five_element():
 def floats(model):
     """The model with Python-float array leaves, for NumPy reference formulas."""
     return jax.tree.map(lambda x: float(x) if eqx.is_array(x) else x, model)
+
+
+def humidity_history(seed: int, samples: int = 150):
+    """A cycling force (N, loaded throughout) and a humidity (%RH) with steps, flats
+    and ramps at another period: `(time s, force, humidity)`. A mechano-sorptive
+    creep runs only while the humidity changes, unlike any function of the load or
+    of the humidity itself."""
+    rng = np.random.default_rng(seed)
+    time = np.linspace(0.0, 3000.0, samples)
+    force = 100.0 * (1 + 0.3 * seed) * (0.6 - 0.4 * np.cos(2 * np.pi * time / 500.0))
+    force = np.clip(force + 0.2 * rng.normal(size=samples), 0.0, None)
+    knots = np.array([0, 600, 900, 1500, 1800, 2300, 2600, 3000]) + 50 * seed
+    humidity = np.interp(time, knots, [50, 50, 80, 80, 50, 50, 85, 85])
+    return time, force, humidity

@@ -10,7 +10,7 @@ import pytest
 
 import jaxcable as jc
 
-from .helpers import finite_difference_grad
+from .helpers import finite_difference_grad, humidity_history
 
 
 BASE = jc.BurgersModel(E1=2e9, eta0=2e13, E2=6e9, eta2=6e10)
@@ -20,14 +20,7 @@ SIZES = {"covariate_strain": 3e-5, "mechano_sorptive": 6e-13, "covariate_shift":
 
 
 def _history(seed: int, samples: int = 120):
-    """A cycling force (N) and a humidity (%RH) with steps, flats and ramps."""
-    rng = np.random.default_rng(seed)
-    time = np.linspace(0.0, 3000.0, samples)
-    force = 100.0 * (1 + 0.3 * seed) * (0.6 - 0.4 * np.cos(2 * np.pi * time / 500.0))
-    force = np.clip(force + 0.2 * rng.normal(size=samples), 0.0, None)
-    knots = np.array([0, 600, 900, 1500, 1800, 2300, 2600, 3000]) + 50 * seed
-    humidity = np.interp(time, knots, [50, 50, 80, 80, 50, 50, 85, 85])
-    return time, force, humidity
+    return humidity_history(seed, samples)
 
 
 def _raw(seeds=(0, 1, 2)):

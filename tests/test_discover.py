@@ -10,7 +10,7 @@ import pytest
 
 import jaxcable as jc
 
-from .helpers import finite_difference_grad
+from .helpers import finite_difference_grad, humidity_history
 
 
 AREA = float(jc.Cable(length=0.3).area)
@@ -22,17 +22,7 @@ BASE_FIT = ("E1", "E2")
 
 
 def _history(seed: int, samples: int = 150):
-    """A load-hold-unload history with a humidity swing, and its cable."""
-    rng = np.random.default_rng(seed)
-    time = np.linspace(0.0, 3000.0, samples)
-    # Loaded throughout, cycling; the humidity swings at another period.
-    force = 100.0 * (1 + 0.3 * seed) * (0.6 - 0.4 * np.cos(2 * np.pi * time / 500.0))
-    force = np.clip(force + 0.2 * rng.normal(size=samples), 0.0, None)
-    # Humidity steps (flat, ramps up and down): the mechano-sorptive creep runs
-    # only while it changes, unlike any function of the load or of c itself.
-    knots = np.array([0, 600, 900, 1500, 1800, 2300, 2600, 3000]) + 50 * seed
-    humidity = np.interp(time, knots, [50, 50, 80, 80, 50, 50, 85, 85])
-    return time, force, humidity
+    return humidity_history(seed, samples)
 
 
 def _tests(model, seeds=(0, 1, 2), noise=2e-6, covariate=True, samples=150):
