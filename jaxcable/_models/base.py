@@ -201,6 +201,13 @@ def add_parts(
     return parts
 
 
+def covariate_of(cable: Cable, like) -> Float[Array, ""]:
+    """The covariate of `cable` (`Cable.covariate`, set per sample from a recorded
+    column) in the dtype of `like`; 0 where none is set."""
+    c = 0.0 if cable.covariate is None else cable.covariate
+    return jnp.asarray(c, jnp.result_type(like))
+
+
 def state_zero(cable: Cable, *like) -> Float[Array, ""]:
     """A scalar 0 of the dtype a model's state takes for `cable` and its parameters
     `like` (at least the default float)."""

@@ -34,15 +34,10 @@ from ..base import (
     AbstractExtension,
     StrainParts,
     add_parts,
+    covariate_of,
     state_zero,
 )
 from .temperature import reduced_time
-
-
-def covariate_of(cable: Cable, like) -> Float[Array, ""]:
-    """The covariate of `cable` in the dtype of `like` (0 where none is set)."""
-    c = 0.0 if cable.covariate is None else cable.covariate
-    return jnp.asarray(c, jnp.result_type(like))
 
 
 class CovariateStrainState(eqx.Module):

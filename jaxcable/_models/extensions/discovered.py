@@ -22,6 +22,7 @@ from ..base import (
     AbstractExtension,
     StrainParts,
     add_parts,
+    covariate_of,
     state_zero,
 )
 from ..kernels import running_max, tension_time_step
@@ -245,9 +246,7 @@ class DiscoveredTerm(AbstractExtension[DiscoveredTermState]):
     ) -> tuple[DiscoveredTermState, StrainParts]:
         base_state, parts = self.base.advance(state.base, cable, dt, force, direction)
         area = cable.area
-        covariate = jnp.asarray(
-            0.0 if cable.covariate is None else cable.covariate, state.covariate.dtype
-        )
+        covariate = covariate_of(cable, state.covariate)
         # The first step has no previous covariate: no change of it then.
         c0 = jnp.where(state.started, state.covariate, covariate)
         force_max = running_max(state.force_max, force)
