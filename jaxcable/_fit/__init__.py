@@ -19,5 +19,6 @@ from .shared import fit_subset as fit_subset, shared_layout as shared_layout
 from .solver import (
     LevenbergMarquardt as LevenbergMarquardt,
     residuals_and_jacobian as residuals_and_jacobian,
+    with_jacobian_jvp as with_jacobian_jvp,
 )
 from .statistics import IdentifiabilityWarning as IdentifiabilityWarning

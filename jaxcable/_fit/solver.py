@@ -118,27 +118,71 @@ def residuals_and_jacobian(
     return r, jacobian
 
 
-def _scaled_residual_fn(problem: Problem, jac: Literal["fwd", "bwd"], scale):
-    """fn(u, args) for optimistix: residuals / scale, whose JVP is a product with the
-    Jacobian computed with them.
+def _zero_tangent(x):
+    x = jnp.asarray(x)
+    if jnp.issubdtype(x.dtype, jnp.inexact):
+        return jnp.zeros_like(x)
+    return np.zeros(x.shape, dtype=jax.dtypes.float0)
 
-    Optimistix linearises fn and then materialises, transposes and applies the
-    linearisation. Through the scan each of those would be its own copy of the scan in
-    the compiled program; with this rule they are products with one dense (n, p)
-    matrix, and the scan is differentiated once per step.
+
+def with_jacobian_jvp(
+    residuals: Callable[[Float[Array, " p"]], tuple[Float[Array, " n"], PyTree]],
+    jac: Literal["fwd", "bwd"] = "fwd",
+    scale: float | Float[Array, ""] = 1.0,
+) -> Callable[[Float[Array, " p"]], tuple[Float[Array, " n"], PyTree]]:
+    """Wrap `residuals(u) -> (r, aux)` for an optimistix least-squares solver: the
+    wrapped function returns `(r / scale, aux)`, and its JVP is a product with the
+    Jacobian computed together with r, in one differentiated pass.
+
+    Optimistix linearises the residual function and then materialises, transposes
+    and applies the linearisation. Through a simulation's scan each of those is its
+    own copy of the scan in the compiled program (the calibration's program compiled
+    in 33 s, 18 s with this rule); with this rule they are products with one dense
+    (n, p) matrix, and the scan is differentiated once per step. `aux` (anything the
+    residuals computed on the way, e.g. the simulated values) has a zero tangent:
+    a solver's state then holds it at the returned point without a further
+    simulation.
+
+    **Arguments:**
+
+    - `residuals`: u (shape (p,)) -> (flat residuals (n,), aux).
+    - `jac`: the Jacobian's mode, `"fwd"` (p tangents through the scan together) or
+        `"bwd"` (one cotangent per residual).
+    - `scale`: the residuals and the Jacobian are divided by it.
+
+    **Returns:**
+
+    The wrapped function u -> `(r / scale, aux)`.
     """
 
     @jax.custom_jvp
-    def scaled(u):
-        return jnp.ravel(problem.residuals(u)) / scale
+    def wrapped(u):
+        r, aux = residuals(u)
+        return r / scale, aux
 
-    @scaled.defjvp
+    @wrapped.defjvp
     def _(primals, tangents):
         (u,), (du,) = primals, tangents
-        r, jacobian = residuals_and_jacobian(problem, u, jac)
-        return r / scale, (jacobian @ du) / scale
 
-    return lambda u, args: scaled(u)
+        def flat(u):
+            r, aux = residuals(u)
+            return r, (r, aux)
+
+        differentiate = jax.jacfwd if jac == "fwd" else jax.jacrev
+        jacobian, (r, aux) = differentiate(flat, has_aux=True)(u)
+        tangent_aux = jax.tree.map(_zero_tangent, aux)
+        return (r / scale, aux), ((jacobian @ du) / scale, tangent_aux)
+
+    return wrapped
+
+
+def _scaled_residual_fn(problem: Problem, jac: Literal["fwd", "bwd"], scale):
+    """fn(u, args) for optimistix: the problem's residuals / scale, their JVP a
+    product with the Jacobian computed with them (`with_jacobian_jvp`)."""
+    fn = with_jacobian_jvp(
+        lambda u: (jnp.ravel(problem.residuals(u)), None), jac, scale
+    )
+    return lambda u, args: fn(u)[0]
 
 
 def solve(

@@ -35,6 +35,7 @@ import numpy as np
 import optimistix as optx
 
 from .._cable import Cable
+from .._fit import with_jacobian_jvp
 from .._models import IntegratedModel
 from .park import (
     FAST_SPEED,
@@ -44,7 +45,6 @@ from .park import (
     cyclic_shape,
     simulate_targets,
     sk78_targets_report,
-    target_values,
 )
 
 
@@ -239,8 +239,9 @@ def _rest_violations(rest_ends, peaks):
 
 
 def _residuals(u, args: _FitArgs):
-    """The residuals of the fit at the unconstrained variables `u`: the weighted
-    target errors, the qualitative soft targets and the prior, all in %."""
+    """The residuals of the fit at the unconstrained variables `u`, flat: the
+    weighted target errors, the qualitative soft targets and the prior, all in %;
+    and the model's target values (in the order of SK78_TARGETS)."""
     logp = _bounded(u, args.lo, args.hi)
     model = _model_from_log(logp)
     values, ok, rest_ends, peaks = simulate_targets(
@@ -263,7 +264,7 @@ def _residuals(u, args: _FitArgs):
     # A failed simulation (e.g. the creep outruns the crosshead) is a wall.
     weighted = jnp.where(finite, weighted, 1e6)
     shape = jnp.where(finite, shape, 0.0)
-    return weighted, shape, prior
+    return jnp.concatenate([weighted, shape, prior]), values
 
 
 class Calibration(NamedTuple):
@@ -290,22 +291,20 @@ def _fit_one(u0, args: _FitArgs, max_steps):
     """One start: Levenberg-Marquardt from `u0`. Returns the solution, its residuals,
     its target values and the number of steps."""
     solver = optx.LevenbergMarquardt(rtol=1e-6, atol=1e-6)
+    fn = with_jacobian_jvp(lambda u: _residuals(u, args))
     sol = optx.least_squares(
-        _residuals,
+        lambda u, _: fn(u),
         solver,
         u0,
-        args=args,
+        has_aux=True,
         options=dict(jac="fwd"),
         max_steps=max_steps,
         throw=False,
     )
-    values, _ = target_values(
-        _model_from_log(_bounded(sol.value, args.lo, args.hi)),
-        args.samples_per_ramp,
-        args.solver,
-        throw=False,
-    )
-    return sol.value, _residuals(sol.value, args), values, sol.stats["num_steps"]
+    # A Gauss-Newton-type solver's state holds the residuals and their aux at the
+    # returned (last accepted) point: no further simulation.
+    state = sol.state
+    return sol.value, state.f_info.residual, state.aux, sol.stats["num_steps"]
 
 
 def calibrate_sk78(
@@ -391,7 +390,7 @@ def calibrate_sk78(
         logp = logp0 if k == 0 else logp0 + spread * rng.standard_normal(logp0.shape)
         u0 = jnp.asarray(_unbounded(np.clip(logp, lo + margin, hi - margin), lo, hi))
         u, residuals, values, num_steps = _fit_one(u0, args, max_steps)
-        cost = float(sum(np.sum(np.asarray(r) ** 2) for r in residuals))
+        cost = float(np.sum(np.asarray(residuals) ** 2))
         costs.append(cost)
         errors.append(float(np.max(np.abs(100 * (np.asarray(values) / targets - 1)))))
         steps.append(int(num_steps))

@@ -53,10 +53,12 @@ def _residuals_and_jacobian(gain, robot, scenario, real, controller):
         run = simulate_robot(robot, scenario, real, controller, gain)
         return run.error.reshape(-1)
 
-    flat = gain.reshape(-1)
-    unflat = lambda g: g.reshape(gain.shape)
-    r = residuals(gain)
-    J = jax.jacfwd(lambda g: residuals(unflat(g)))(flat)
+    def with_residuals(flat):
+        r = residuals(flat.reshape(gain.shape))
+        return r, r
+
+    # One differentiated run gives both: the residuals are its primal.
+    J, r = jax.jacfwd(with_residuals, has_aux=True)(gain.reshape(-1))
     return r, J
 
 
