@@ -431,3 +431,32 @@ def test_early_stop_keeps_the_minimum():
     assert early.num_steps < plain.num_steps
     np.testing.assert_allclose(early.values, plain.values, rtol=1e-5)
     np.testing.assert_allclose(early.loss, plain.loss, rtol=1e-9)
+
+
+def test_with_jacobian_jvp_differentiates_like_the_plain_function():
+    # The rule behind the fit's and the calibration's Levenberg-Marquardt: the JVP is
+    # a product with the Jacobian computed with the residuals; aux rides along with a
+    # zero tangent; the residuals and the Jacobian are divided by `scale`.
+    from jaxcable._fit import with_jacobian_jvp
+
+    def residuals(u):
+        r = jnp.stack([jnp.sin(u[0]) * u[1], u[0] ** 3, jnp.exp(u[1])])
+        return r, {"values": 2.0 * r, "count": jnp.array(3)}
+
+    u = jnp.array([0.3, -1.2])
+    for jac in ("fwd", "bwd"):
+        fn = with_jacobian_jvp(residuals, jac, scale=4.0)
+        r, aux = fn(u)
+        np.testing.assert_allclose(r, residuals(u)[0] / 4.0, rtol=1e-15)
+        np.testing.assert_allclose(aux["values"], residuals(u)[1]["values"])
+        J = jax.jacfwd(lambda u: fn(u)[0])(u)
+        J_plain = jax.jacfwd(lambda u: residuals(u)[0] / 4.0)(u)
+        np.testing.assert_allclose(J, J_plain, rtol=1e-14)
+        # Linearised as optimistix does: a product with the Jacobian, aux returned.
+        r0, lin, aux0 = jax.linearize(fn, u, has_aux=True)
+        v = jnp.array([0.7, -0.2])
+        np.testing.assert_allclose(lin(v), J_plain @ v, rtol=1e-14)
+        np.testing.assert_allclose(aux0["values"], 2.0 * 4.0 * r0, rtol=1e-15)
+        # aux's tangent is zero.
+        tangent_aux = jax.jvp(lambda u: fn(u)[1]["values"], (u,), (jnp.ones(2),))[1]
+        np.testing.assert_array_equal(tangent_aux, np.zeros(3))
