@@ -108,3 +108,48 @@ def test_fallback_lanes_under_vmap_match_single_solves():
     assert converged[:2].all() and not converged[2:].any()
     np.testing.assert_allclose(value[:2], [1.0, 7.0], atol=1e-5)
     assert no_root[2] and not no_root[[0, 1, 3]].any()
+
+
+def test_root_derivative_is_implicit_on_newton_and_bisected_lanes():
+    # The root's derivative comes from the implicit function theorem with the slope
+    # the solve evaluated (Newton's lanes) or, for a root found by bisection, which
+    # evaluates no slopes, the slope at the root: here the root is y = c, so
+    # dy/dc = 1 exactly on every lane that has a root, in forward and reverse mode,
+    # alone and under vmap.
+    import jax
+    import jax.numpy as jnp
+
+    from jaxcable._drive.newton import Newton, root_scalar
+
+    def fn(y, c):
+        return jnp.tanh(4.0 * (y - c))
+
+    solver = Newton(tol=1e-10, max_steps=3)
+
+    def root(c, guess):
+        return root_scalar(
+            fn,
+            solver,
+            guess,
+            c,
+            jnp.zeros_like(guess),
+            slope_sign=jnp.ones_like(guess),
+            growth=jnp.asarray(1e-3),
+        ).value
+
+    # Newton converges from 1.01; from 30 it overshoots and bisection finishes.
+    c = jnp.array([1.0, 7.0])
+    guess = jnp.array([1.01, 30.0])
+    for i in range(2):
+        np.testing.assert_allclose(root(c[i], guess[i]), c[i], atol=1e-9)
+        np.testing.assert_allclose(jax.grad(root)(c[i], guess[i]), 1.0, rtol=1e-8)
+        _, tangent = jax.jvp(lambda c: root(c, guess[i]), (c[i],), (1.0,))
+        np.testing.assert_allclose(tangent, 1.0, rtol=1e-8)
+    np.testing.assert_allclose(
+        jax.jacfwd(lambda c: jax.vmap(root)(c, guess))(c), np.eye(2), atol=1e-8
+    )
+    np.testing.assert_allclose(
+        jax.jacrev(lambda c: jax.vmap(root)(c, guess))(c), np.eye(2), atol=1e-8
+    )
+    # The guess does not move the root.
+    assert jax.grad(root, argnums=1)(c[0], guess[0]) == 0.0

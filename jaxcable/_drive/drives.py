@@ -209,6 +209,7 @@ class RateDrive(AbstractDrive):
             slope_sign=slope_sign,
             growth=1e-6 / cable.strain_rate,
             active=_active(state, sample),
+            name=SOLUTION,
             # On a ramp, beyond a crosshead travel of twice the model's strain
             # limit no root is physical (a root below it but past the limit is
             # flagged `nonphysical_strain` below); a hold's time is its duration.
@@ -309,6 +310,7 @@ class ElongationDrive(AbstractDrive):
             slope_sign=jnp.ones_like(guess),
             growth=1e-6 * cable.breaking_load,
             active=_active(state, sample),
+            name=SOLUTION,
         )
         unloaded = slack & ~root.converged
         force = checkpoint_name(jnp.where(unloaded, zero, root.value), SOLUTION)

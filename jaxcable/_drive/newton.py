@@ -9,6 +9,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import optimistix as optx
+from jax.ad_checkpoint import checkpoint_name
 from jaxtyping import Array, Bool, Float, Int
 
 
@@ -24,8 +25,8 @@ class Newton(eqx.Module):
     `benchmarks/kernel.py`): each unrolled step is a copy of the model's code in the
     scan body, and a larger body costs more per sample than the loop's predicate,
     also under `vmap`, where the loop runs until every lane has converged.
-    Derivatives are taken by the implicit function theorem (`jax.lax.custom_root`),
-    never through the iterations.
+    Derivatives are taken by the implicit function theorem with the slope of the
+    last Newton step (`_implicit_root`), never through the iterations.
 
     Any optimistix root finder (e.g. `optx.Newton(rtol, atol)`) can be passed
     instead, where a simulation takes `solver=`; it runs through `optx.root_find`
@@ -146,15 +147,17 @@ _NEWTON, _SEARCH, _BISECT, _DONE = 0, 1, 2, 3
 class _SolveState(eqx.Module):
     """The carry of `root_scalar`'s loop, one lane.
 
-    Newton's method: the next iterate `y`, the residual at the previous one
-    (|residual| <= tol: converged), whether the iterate is `stuck` at `lower`, and
-    the Newton `steps` taken. The fallback: the step `k` of the bracket search or of
-    the bisection, and the last point that it evaluated (`y_end`, with residual
-    `r_end`). Both: the `bracket` of all points evaluated and the lane's `phase`.
+    Newton's method: the next iterate `y`, the residual and the `slope` at the
+    previous one (|residual| <= tol: converged), whether the iterate is `stuck` at
+    `lower`, and the Newton `steps` taken. The fallback: the step `k` of the bracket
+    search or of the bisection, and the last point that it evaluated (`y_end`, with
+    residual `r_end`). Both: the `bracket` of all points evaluated and the lane's
+    `phase`.
     """
 
     y: Float[Array, ""]
     residual: Float[Array, ""]
+    slope: Float[Array, ""]
     bracket: _Bracket
     stuck: Bool[Array, ""]
     steps: Int[Array, ""] | int
@@ -162,6 +165,48 @@ class _SolveState(eqx.Module):
     k: Int[Array, ""]
     y_end: Float[Array, ""]
     r_end: Float[Array, ""]
+
+
+@eqx.filter_custom_jvp
+def _implicit_root(y, slope, args, *, fn):
+    """The root `y` of fn(., args), differentiated in `args` by the implicit function
+    theorem: dy = -(d fn / d args . dargs) / slope.
+
+    `slope` (d fn / dy) is the one the solve evaluated at its last Newton iterate
+    (within the tolerance of the root), so that a derivative costs one
+    differentiated evaluation of fn, not two (`jax.lax.custom_root` linearises fn in
+    y again at the root). Where it is NaN (a root found by bisection, which evaluates
+    no slopes) it is evaluated at the root here, in a loop that a batch without such
+    roots enters for one predicate only."""
+    del slope, args, fn
+    return y
+
+
+@_implicit_root.def_jvp
+def _implicit_root_jvp(primals, tangents, *, fn):
+    y, slope, args = primals
+    _, _, t_args = tangents
+    if t_args is None:
+        return y, None
+    # Only the differentiated leaves get tangents: the others stay symbolic zeros.
+    is_none = lambda x: x is None
+    diff = jax.tree_util.tree_map(
+        lambda t, a: None if t is None else a, t_args, args, is_leaf=is_none
+    )
+    rest = jax.tree_util.tree_map(
+        lambda t, a: a if t is None else None, t_args, args, is_leaf=is_none
+    )
+    _, rhs = jax.jvp(lambda d: fn(y, eqx.combine(d, rest)), (diff,), (t_args,))
+
+    def root_slope(c):
+        _, at_root = jax.jvp(lambda y: fn(y, args), (y,), (jnp.ones_like(y),))
+        return jnp.zeros_like(c[0]), at_root
+
+    _, slope = jax.lax.while_loop(lambda c: c[0], root_slope, (jnp.isnan(slope), slope))
+    # A zero slope only occurs where the caller discards the root (e.g. a slack
+    # cable); keep its tangent finite so that `jnp.where` does not leak NaNs.
+    bad = (slope == 0) | ~jnp.isfinite(slope)
+    return y, -rhs / jnp.where(bad, 1.0, slope)
 
 
 def root_scalar(
@@ -174,6 +219,7 @@ def root_scalar(
     growth: Float[Array, ""] | None = None,
     active: Bool[Array, ""] | None = None,
     upper: Float[Array, ""] | None = None,
+    name: str | None = None,
 ) -> RootResult:
     """Solve fn(y, args) = 0 for a scalar lower <= y <= upper.
 
@@ -208,6 +254,10 @@ def root_scalar(
     `active` (default: all) marks the lanes to solve: a lane that is not active
     (a cable that has already failed, under `vmap`) takes the unrolled steps only,
     so it never keeps the batch's loops running.
+
+    `name` (jaxcable's `Newton` only), where given, is the `checkpoint_name` of the
+    root and of the slope its derivative uses: a rematerialised backward pass that
+    saves that name then never repeats the solve.
     """
     if isinstance(solver, optx.AbstractRootFinder):
         if slope_sign is not None:
@@ -235,7 +285,9 @@ def root_scalar(
 
     tol = solver.tol
     live = jnp.ones_like(guess, dtype=bool) if active is None else active
-    top = jnp.inf if upper is None else upper
+    top = jnp.inf if upper is None else jax.lax.stop_gradient(upper)
+    lower = jax.lax.stop_gradient(lower)
+    growth = None if growth is None else jax.lax.stop_gradient(growth)
 
     def newton_step(y, r, slope):
         # The next iterate from the residual `r` and the `slope` at `y`.
@@ -277,9 +329,9 @@ def root_scalar(
         y, stuck = newton_step(s.y, r, slope)
         bracket = s.bracket.see(s.y, r)
         return eqx.tree_at(
-            lambda s: (s.y, s.residual, s.bracket, s.stuck, s.steps),
+            lambda s: (s.y, s.residual, s.slope, s.bracket, s.stuck, s.steps),
             s,
-            (y, r, bracket, stuck, s.steps + 1),
+            (y, r, slope, bracket, stuck, s.steps + 1),
         )
 
     def settle(s: _SolveState) -> _SolveState:
@@ -328,7 +380,7 @@ def root_scalar(
         no = jnp.zeros_like(y0, dtype=bool)
         zero = jnp.zeros_like(y0, dtype=jnp.int32)
         bracket = _Bracket.empty(y0, slope_sign)
-        state = _SolveState(y0, inf, bracket, no, 0, zero, zero, y0, inf)
+        state = _SolveState(y0, inf, inf, bracket, no, 0, zero, zero, y0, inf)
         for _ in range(solver.unrolled):
             state = newton(state, f)
         state = jax.lax.while_loop(newton_on, lambda s: newton(s, f), state)
@@ -345,19 +397,18 @@ def root_scalar(
         # A lane with a bracket has bisected it (at least one step).
         bisected = failed & state.bracket.found
         y = jnp.where(bisected, state.y_end, y)
+        # A bisected root has no slope yet: `_implicit_root` evaluates it, only
+        # where it is differentiated.
+        slope = jnp.where(bisected, jnp.nan, state.slope)
         ok = ok | (bisected & (jnp.abs(state.r_end) <= tol))
-        # Float flags: custom_root gives aux a tangent, which a bool cannot have.
-        return y, (ok.astype(y.dtype), no_root.astype(y.dtype))
+        return y, slope, ok, no_root
 
-    def tangent_solve(g, y):
-        # A zero slope only occurs where the caller discards the root (e.g. a slack
-        # cable); keep its tangent finite so that `jnp.where` does not leak NaNs.
-        slope = g(jnp.ones_like(y))
-        bad = (slope == 0) | ~jnp.isfinite(slope)
-        return y / jnp.where(bad, 1.0, slope)
-
-    y, (ok, no_root) = jax.lax.custom_root(
-        lambda y: fn(y, args), guess, solve, tangent_solve, has_aux=True
-    )
-    ok, no_root = jax.lax.stop_gradient((ok, no_root))
-    return RootResult(y, ok > 0.5, no_root > 0.5)
+    # The solve itself is never differentiated (nor are its start and bounds): the
+    # root's derivatives come from the implicit function theorem (`_implicit_root`).
+    diff, static = eqx.partition(args, eqx.is_inexact_array)
+    frozen = eqx.combine(jax.lax.stop_gradient(diff), static)
+    y, slope, ok, no_root = solve(lambda y: fn(y, frozen), jax.lax.stop_gradient(guess))
+    if name is not None:
+        y, slope = checkpoint_name((y, slope), name)
+    y = _implicit_root(y, slope, args, fn=fn)
+    return RootResult(y, ok, no_root)
