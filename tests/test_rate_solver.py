@@ -140,16 +140,23 @@ def test_root_derivative_is_implicit_on_newton_and_bisected_lanes():
     # Newton converges from 1.01; from 30 it overshoots and bisection finishes.
     c = jnp.array([1.0, 7.0])
     guess = jnp.array([1.01, 30.0])
-    for i in range(2):
-        np.testing.assert_allclose(root(c[i], guess[i]), c[i], atol=1e-9)
-        np.testing.assert_allclose(jax.grad(root)(c[i], guess[i]), 1.0, rtol=1e-8)
-        _, tangent = jax.jvp(lambda c: root(c, guess[i]), (c[i],), (1.0,))
-        np.testing.assert_allclose(tangent, 1.0, rtol=1e-8)
-    np.testing.assert_allclose(
-        jax.jacfwd(lambda c: jax.vmap(root)(c, guess))(c), np.eye(2), atol=1e-8
-    )
-    np.testing.assert_allclose(
-        jax.jacrev(lambda c: jax.vmap(root)(c, guess))(c), np.eye(2), atol=1e-8
-    )
+
+    @jax.jit
+    def derivatives(c, guess):
+        batched = lambda c: jax.vmap(root)(c, guess)
+        return (
+            batched(c),
+            jax.jacfwd(batched)(c),
+            jax.jacrev(batched)(c),
+            # One lane alone: the bisected one, and the guess of the other.
+            jax.grad(root)(c[1], guess[1]),
+            jax.grad(root, argnums=1)(c[0], guess[0]),
+        )
+
+    value, forward, reverse, alone, by_guess = derivatives(c, guess)
+    np.testing.assert_allclose(value, c, atol=1e-9)
+    np.testing.assert_allclose(forward, np.eye(2), atol=1e-8)
+    np.testing.assert_allclose(reverse, np.eye(2), atol=1e-8)
+    np.testing.assert_allclose(alone, 1.0, rtol=1e-8)
     # The guess does not move the root.
-    assert jax.grad(root, argnums=1)(c[0], guess[0]) == 0.0
+    assert by_guess == 0.0

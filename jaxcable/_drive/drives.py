@@ -195,10 +195,15 @@ class RateDrive(AbstractDrive):
         # The residual's scale: the strains at the start of the step and at the
         # guessed end (the crosshead's, where the guess puts it), which bracket the
         # strain of the solution to first order; fixed for the solve so that it
-        # cannot bend the slope.
+        # cannot bend the slope. Not differentiated: at the root the residual's
+        # numerator is zero, so the root does not depend on the scale, and its
+        # derivative would carry the guess's (a whole step of the model at the
+        # start of a ramp) into every differentiated program.
         sign = jnp.where(branch != 0, branch, 1).astype(guess.dtype)
         target = state.strain + sign * cable.strain_rate * guess
-        scale = jnp.abs(state.strain) + jnp.abs(target) + _STRAIN_FLOOR
+        scale = jax.lax.stop_gradient(
+            jnp.abs(state.strain) + jnp.abs(target) + _STRAIN_FLOOR
+        )
         problem = _TimeProblem(model, cable, state, force, branch, duration, scale)
         root = root_scalar(
             _time_residual,
