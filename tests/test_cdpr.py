@@ -193,3 +193,18 @@ def test_two_hour_scenario_table():
     assert cdpr.removed(table, "integrated", "none") >= 80.0
     assert cdpr.removed(table, "integrated", "Hooke") >= 80.0
     assert table["integrated"]["max_mm"] < table["none"]["max_mm"]
+
+
+def test_closed_form_3x3_solve_matches_lapack():
+    # The robot's Newton and Gauss-Newton steps solve 3 x 3 systems in closed form.
+    from jaxcable.cdpr.robot import _solve3
+
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        a = rng.standard_normal((3, 8))
+        m = a @ a.T + 1e-3 * np.eye(3)
+        b = rng.standard_normal(3)
+        np.testing.assert_allclose(_solve3(m, b), np.linalg.solve(m, b), rtol=1e-10)
+    # A general (non-symmetric) matrix too.
+    m = rng.standard_normal((3, 3)) + 3 * np.eye(3)
+    np.testing.assert_allclose(_solve3(m, b), np.linalg.solve(m, b), rtol=1e-10)
