@@ -110,12 +110,23 @@ def residuals_and_jacobian(
     forward mode carries the p tangents through the scan together, reverse mode one
     cotangent per residual."""
 
-    def flat(u):
-        r = jnp.ravel(problem.residuals(u))
-        return r, r
-
-    jacobian, r = (jax.jacfwd if jac == "fwd" else jax.jacrev)(flat, has_aux=True)(u)
+    jacobian, r, _ = _differentiated(
+        lambda u: (jnp.ravel(problem.residuals(u)), None), u, jac
+    )
     return r, jacobian
+
+
+def _differentiated(residuals, u, jac: Literal["fwd", "bwd"]):
+    """`(jacobian, r, aux)` of `residuals(u) -> (r, aux)`: the Jacobian of r in u,
+    with r and aux from the same differentiated pass (no second simulation)."""
+
+    def flat(u):
+        r, aux = residuals(u)
+        return r, (r, aux)
+
+    differentiate = jax.jacfwd if jac == "fwd" else jax.jacrev
+    jacobian, (r, aux) = differentiate(flat, has_aux=True)(u)
+    return jacobian, r, aux
 
 
 def _zero_tangent(x):
@@ -163,13 +174,7 @@ def with_jacobian_jvp(
     @wrapped.defjvp
     def _(primals, tangents):
         (u,), (du,) = primals, tangents
-
-        def flat(u):
-            r, aux = residuals(u)
-            return r, (r, aux)
-
-        differentiate = jax.jacfwd if jac == "fwd" else jax.jacrev
-        jacobian, (r, aux) = differentiate(flat, has_aux=True)(u)
+        jacobian, r, aux = _differentiated(residuals, u, jac)
         tangent_aux = jax.tree.map(_zero_tangent, aux)
         return (r / scale, aux), ((jacobian @ du) / scale, tangent_aux)
 
