@@ -37,7 +37,7 @@ from ..base import (
     covariate_of,
     state_zero,
 )
-from .temperature import reduced_time
+from .temperature import advance_shifted, check_shifted
 
 
 class CovariateStrainState(eqx.Module):
@@ -277,8 +277,7 @@ class CovariateShift(AbstractExtension[PyTree]):
             _checks.parameters_ok(self, ("k", "c_ref"), positive=False),
             jnp.all(jnp.isfinite(log_a)),
         )
-        _, reduced = reduced_time(cable, 0.0, jnp.where(ok, log_a, 0.0))
-        return _checks.domain_result(ok, self.base.check(reduced))
+        return check_shifted(self.base, cable, ok, log_a)
 
     def advance(
         self,
@@ -288,5 +287,5 @@ class CovariateShift(AbstractExtension[PyTree]):
         force: Float[Array, ""],
         direction: Int[Array, ""],
     ) -> tuple[PyTree, StrainParts]:
-        dt_eff, reduced = reduced_time(cable, dt, self.log_shift(cable))
-        return self.base.advance(state, reduced, dt_eff, force, direction)
+        log_a = self.log_shift(cable)
+        return advance_shifted(self.base, state, cable, dt, force, direction, log_a)

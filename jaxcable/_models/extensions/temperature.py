@@ -60,6 +60,32 @@ def reduced_time(
     return dt / a_t, cable_reduced
 
 
+def check_shifted(
+    base: AbstractCableModel, cable: Cable, ok: Bool[Array, ""], log_a
+) -> RESULTS:
+    """The check of a time-shift extension (temperature or covariate): `ok`, whether
+    the shift is in its domain, and the base's check on reduced time, at a = 1
+    where the shift is out of its domain (the result is then
+    `parameter_out_of_domain` anyway)."""
+    _, reduced = reduced_time(cable, 0.0, jnp.where(ok, log_a, 0.0))
+    return _checks.domain_result(ok, base.check(reduced))
+
+
+def advance_shifted(
+    base: AbstractCableModel,
+    state: PyTree,
+    cable: Cable,
+    dt: Float[Array, ""],
+    force: Float[Array, ""],
+    direction: Int[Array, ""],
+    log_a: Float[Array, ""],
+) -> tuple[PyTree, StrainParts]:
+    """The step of a time-shift extension: the base's step on reduced time
+    (`reduced_time`), with shift log10 a = `log_a`."""
+    dt_eff, reduced = reduced_time(cable, dt, log_a)
+    return base.advance(state, reduced, dt_eff, force, direction)
+
+
 class AbstractTemperatureShift(AbstractExtension[PyTree]):
     """Time-temperature superposition: every time-dependent process of the base runs
     on reduced time dt_eff = dt / a_T(T), T = `cable.temperature` (K) read at each
@@ -93,11 +119,7 @@ class AbstractTemperatureShift(AbstractExtension[PyTree]):
         ok = _checks.all_ok(
             self.shift_ok(cable), _checks.parameters_ok(self, ("T_ref",))
         )
-        # Outside the domain the base is checked at a_T = 1 (its result is then
-        # replaced by `parameter_out_of_domain` anyway).
-        log_a = jnp.where(ok, self.log_shift(cable.temperature), 0.0)
-        _, reduced = reduced_time(cable, 0.0, log_a)
-        return _checks.domain_result(ok, self.base.check(reduced))
+        return check_shifted(self.base, cable, ok, self.log_shift(cable.temperature))
 
     def advance(
         self,
@@ -107,8 +129,8 @@ class AbstractTemperatureShift(AbstractExtension[PyTree]):
         force: Float[Array, ""],
         direction: Int[Array, ""],
     ) -> tuple[PyTree, StrainParts]:
-        dt_eff, reduced = reduced_time(cable, dt, self.log_shift(cable.temperature))
-        return self.base.advance(state, reduced, dt_eff, force, direction)
+        log_a = self.log_shift(cable.temperature)
+        return advance_shifted(self.base, state, cable, dt, force, direction, log_a)
 
 
 class TemperatureShift(AbstractTemperatureShift):
