@@ -95,9 +95,10 @@ def _outcome(
     """`(converged, message, ssr, statistics)` of the chosen start; with `throw`, a
     `RuntimeError` when it failed or did not converge."""
     best = int(out.best)
-    converged = bool(out.converged[best])
+    # Indexed on the host: an index of a device array is a program of its own.
+    converged = bool(np.asarray(out.converged)[best])
     message = "" if converged else str(optx.RESULTS[out.best_result])
-    ssr = float(out.ssr[best])
+    ssr = float(np.asarray(out.ssr)[best])
     if math.isfinite(ssr):
         stats = statistics(out.gram, out.natural_jacobian, out.natural, ssr, n, labels)
     else:
@@ -346,7 +347,7 @@ def fit_result(
         warnings=stats.warnings,
         converged=converged,
         message=message,
-        num_steps=int(out.steps[int(out.best)]),
+        num_steps=int(np.asarray(out.steps)[int(out.best)]),
         start_losses=np.asarray(out.ssr, float),
         per_test=per_test,
     )
