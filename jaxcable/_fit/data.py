@@ -8,7 +8,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Bool, Float
+from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .. import _checks
 from .._cable import ZERO_CELSIUS, Cable
@@ -70,11 +70,15 @@ class PaddedTests(eqx.Module):
         return np.array([i for i, d in enumerate(self.drive) if d != "force"], int)
 
     @property
-    def measured(self) -> Float[Array, "tests samples"]:
+    def measured(self) -> Float[ArrayLike, "tests samples"]:
         """The scored channel of each test (elongation m, or force N), 0 where its
-        weight is 0."""
+        weight is 0: computed by NumPy on the host unless traced (eager JAX
+        operations each load a compiled program, ~10-25 ms in a fresh process)."""
+        xp = (
+            np if _checks.is_concrete(self.force, self.elongation, self.weight) else jnp
+        )
         elongation = np.array([d != "force" for d in self.drive])[:, None]
-        return jnp.where(elongation, self.force, self.elongation) * self.weight
+        return xp.where(elongation, self.force, self.elongation) * self.weight
 
     @property
     def units(self) -> tuple[str, ...]:
@@ -333,21 +337,28 @@ def pad_tests(
         )
 
     dtype = jnp.result_type(float)
+
+    def put(x, dtype=dtype):
+        # Converted by NumPy, then transferred: `jnp.asarray` of a NumPy array runs
+        # a small compiled program per shape and dtype (25 ms each in a fresh
+        # process, measured), `device_put` only copies.
+        return jax.device_put(np.asarray(x, dtype))
+
     # One transfer per field (not per test): host overhead counts in a fit of ~50 ms.
     cable = jax.tree_util.tree_map(
-        lambda *xs: jnp.asarray(np.stack([np.asarray(x) for x in xs]), dtype),
+        lambda *xs: put(np.stack([np.asarray(x) for x in xs])),
         *(r.cable for r in rows),
     )
     return PaddedTests(
-        time=jnp.asarray(padded([r.time for r in rows]), dtype),
-        force=jnp.asarray(padded([r.force for r in rows]), dtype),
-        elongation=jnp.asarray(padded([r.elongation for r in rows], 0.0), dtype),
+        time=put(padded([r.time for r in rows])),
+        force=put(padded([r.force for r in rows])),
+        elongation=put(padded([r.elongation for r in rows], 0.0)),
         # A padding sample neither drives the model nor enters the residual.
-        simulate=jnp.asarray(padded([np.ones_like(r.mask) for r in rows], False)),
-        weight=jnp.asarray(padded([r.mask for r in rows], False).astype(float), dtype),
-        temperature=jnp.asarray(padded([r.temperature for r in rows]), dtype),
-        covariate=jnp.asarray(padded([r.covariate for r in rows]), dtype),
+        simulate=put(padded([np.ones_like(r.mask) for r in rows], False), bool),
+        weight=put(padded([r.mask for r in rows], False)),
+        temperature=put(padded([r.temperature for r in rows])),
+        covariate=put(padded([r.covariate for r in rows])),
         cable=cable,
         drive=tuple(drives),
-        scale=jnp.asarray(_scales(rows), dtype),
+        scale=put(_scales(rows)),
     )
