@@ -74,11 +74,11 @@ class PaddedTests(eqx.Module):
         """The scored channel of each test (elongation m, or force N), 0 where its
         weight is 0: computed by NumPy on the host unless traced (eager JAX
         operations each load a compiled program, ~10-25 ms in a fresh process)."""
-        xp = (
-            np if _checks.is_concrete(self.force, self.elongation, self.weight) else jnp
-        )
-        elongation = np.array([d != "force" for d in self.drive])[:, None]
-        return xp.where(elongation, self.force, self.elongation) * self.weight
+        arrays = (self.force, self.elongation, self.weight)
+        xp = np if _checks.is_concrete(*arrays) else jnp
+        force, elongation, weight = (xp.asarray(x) for x in arrays)
+        scored_force = np.array([d != "force" for d in self.drive])[:, None]
+        return xp.where(scored_force, force, elongation) * weight
 
     @property
     def units(self) -> tuple[str, ...]:
