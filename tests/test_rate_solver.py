@@ -66,6 +66,26 @@ def test_unloading_with_strong_short_recovery_converges():
     )
 
 
+def _tanh_root(tol, guess, c, active=None):
+    """`root_scalar` on fn(y, c) = tanh(4 (y - c)): a root at y = c along a rising
+    tanh, flat far from it, so that Newton's steps (at most 3) overshoot from far
+    away; c < 0 puts the root below `lower` (no root)."""
+    import jax.numpy as jnp
+
+    from jaxcable._drive.newton import Newton, root_scalar
+
+    return root_scalar(
+        lambda y, c: jnp.tanh(4.0 * (y - c)),
+        Newton(tol=tol, max_steps=3),
+        guess,
+        c,
+        jnp.zeros_like(guess),
+        slope_sign=jnp.ones_like(guess),
+        growth=jnp.asarray(1e-3),
+        active=active,
+    )
+
+
 def test_fallback_lanes_under_vmap_match_single_solves():
     # The bracket search and the bisection share one loop in which each lane goes
     # through its own phases: under vmap, a lane that Newton's method solves, one it
@@ -74,26 +94,8 @@ def test_fallback_lanes_under_vmap_match_single_solves():
     import jax
     import jax.numpy as jnp
 
-    from jaxcable._drive.newton import Newton, root_scalar
-
-    def fn(y, c):
-        # A root at y = c along a rising tanh, flat far from it: Newton's steps
-        # overshoot from far away; c < 0 puts the root below `lower` (no root).
-        return jnp.tanh(4.0 * (y - c))
-
-    solver = Newton(tol=1e-6, max_steps=3)
-
     def solve(guess, c, active):
-        r = root_scalar(
-            fn,
-            solver,
-            guess,
-            c,
-            jnp.zeros_like(guess),
-            slope_sign=jnp.ones_like(guess),
-            growth=jnp.asarray(1e-3),
-            active=active,
-        )
+        r = _tanh_root(1e-6, guess, c, active)
         return r.value, r.converged, r.no_root
 
     guess = jnp.array([1.01, 30.0, 0.5, 30.0])
@@ -119,23 +121,8 @@ def test_root_derivative_is_implicit_on_newton_and_bisected_lanes():
     import jax
     import jax.numpy as jnp
 
-    from jaxcable._drive.newton import Newton, root_scalar
-
-    def fn(y, c):
-        return jnp.tanh(4.0 * (y - c))
-
-    solver = Newton(tol=1e-10, max_steps=3)
-
     def root(c, guess):
-        return root_scalar(
-            fn,
-            solver,
-            guess,
-            c,
-            jnp.zeros_like(guess),
-            slope_sign=jnp.ones_like(guess),
-            growth=jnp.asarray(1e-3),
-        ).value
+        return _tanh_root(1e-10, guess, c).value
 
     # Newton converges from 1.01; from 30 it overshoots and bisection finishes.
     c = jnp.array([1.0, 7.0])
