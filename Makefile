@@ -5,7 +5,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 WORKERS ?= 2
 
-.PHONY: demo test lint format bench clean
+.PHONY: demo test test-xla-default lint format bench clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -23,7 +23,12 @@ test: $(STAMP)
 	# time each, the slowest first (tests/conftest.py), and one compilation cache. Two
 	# processes also because late in one long process XLA's CPU compiler crashed
 	# (SIGSEGV, SIGABRT) on a fresh clone; each half of the suite alone passes.
+	# tests/conftest.py compiles with XLA's faster-compiling CPU emitters when this jaxlib
+	# has them; `make test-xla-default` runs the same suite with XLA's default emitters.
 	$(BIN)/pytest -q --durations=25 -n $(WORKERS) --dist loadgroup tests
+
+test-xla-default: $(STAMP)
+	JAXCABLE_TEST_XLA_EMITTERS=default $(BIN)/pytest -q --durations=25 -n $(WORKERS) --dist loadgroup tests
 
 lint: $(STAMP)
 	$(BIN)/ruff check .

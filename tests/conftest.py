@@ -2,6 +2,8 @@ import atexit
 import os
 import pathlib
 import shutil
+import subprocess
+import sys
 import tempfile
 
 
@@ -26,6 +28,44 @@ TEST_CACHE = (
     if os.environ[TEST_CACHE_ENV] == "off"
     else pathlib.Path(os.environ[TEST_CACHE_ENV])
 )
+
+# XLA's CPU backend compiles each fusion through its MLIR fusion emitters by default.
+# The suite compiles about 1300 programs and runs most of them a few times on small
+# problems, so compilation is most of its cost; XLA's older LLVM IR emitters compile
+# the same programs about 40 % faster (issue 14: the whole suite 595 -> 427 s on two
+# cores, every test passing either way). They run large batches slower (a 1024-cable
+# forward 3x), which is why the library leaves XLA's defaults alone and only the
+# suite, its notebooks' kernels and its subprocesses switch. The first process of the
+# run checks that this jaxlib knows the flag (XLA aborts on an unknown one) and the
+# workers inherit its choice. JAXCABLE_TEST_XLA_EMITTERS=default keeps XLA's default
+# emitters (`make test-xla-default`).
+TEST_EMITTERS_ENV = "JAXCABLE_TEST_XLA_EMITTERS"
+LEGACY_EMITTERS = "--xla_cpu_use_fusion_emitters=false"
+
+
+def _with_flag(flags: str, flag: str) -> str:
+    return f"{flags} {flag}".strip()
+
+
+def _jaxlib_accepts(flag: str) -> bool:
+    env = {**os.environ, "XLA_FLAGS": _with_flag(os.environ.get("XLA_FLAGS", ""), flag)}
+    env["JAX_PLATFORMS"] = "cpu"
+    probe = "import jax, jax.numpy as jnp; jnp.zeros(()).block_until_ready()"
+    try:
+        done = subprocess.run(
+            [sys.executable, "-c", probe], env=env, capture_output=True, timeout=120
+        )
+    except subprocess.TimeoutExpired:
+        return False
+    return done.returncode == 0
+
+
+_flags = os.environ.get("XLA_FLAGS", "")
+if TEST_EMITTERS_ENV not in os.environ:
+    _legacy = "use_fusion_emitters" not in _flags and _jaxlib_accepts(LEGACY_EMITTERS)
+    os.environ[TEST_EMITTERS_ENV] = "legacy" if _legacy else "default"
+if os.environ[TEST_EMITTERS_ENV] == "legacy" and LEGACY_EMITTERS not in _flags:
+    os.environ["XLA_FLAGS"] = _with_flag(_flags, LEGACY_EMITTERS)
 
 import jax  # noqa: E402
 import pytest  # noqa: E402
@@ -106,6 +146,13 @@ def _rank(item: pytest.Item) -> int:
         if item.nodeid.startswith(prefix):
             return rank
     return len(SLOW_FIRST)
+
+
+def pytest_report_header(config):
+    return (
+        f"XLA CPU emitters: {os.environ[TEST_EMITTERS_ENV]} "
+        f"(XLA_FLAGS={os.environ.get('XLA_FLAGS', '')!r})"
+    )
 
 
 @pytest.hookimpl(tryfirst=True)

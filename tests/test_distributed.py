@@ -51,8 +51,10 @@ def _env():
     env = dict(os.environ)
     env["JAX_PLATFORMS"] = "cpu"
     env["PYTHONPATH"] = os.pathsep.join([str(ROOT), env.get("PYTHONPATH", "")])
-    # One CPU device per process is set by --cpu-devices, not by leftover flags.
-    env.pop("XLA_FLAGS", None)
+    # One CPU device per process is set by --cpu-devices, not by leftover flags; the
+    # suite's other XLA flags stay (tests/conftest.py).
+    flags = env.pop("XLA_FLAGS", "").split()
+    env["XLA_FLAGS"] = " ".join(f for f in flags if "device_count" not in f)
     for name in ("JAX_COORDINATOR_ADDRESS", "JAX_NUM_PROCESSES", "JAX_PROCESS_ID"):
         env.pop(name, None)
     return env
