@@ -8,6 +8,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
 from . import _checks
+from ._arrays import field_array, optional_field_array
 
 
 # The fields of a Cable, in order (one place to list them for checks and batching).
@@ -34,10 +35,6 @@ M_PER_MM = 1e-3
 # cable whose file leaves them out.
 DEFAULT_DIAMETER_MM = 3.0
 DEFAULT_RATE_MM_PER_MIN = 3.0
-
-
-def _optional_array(x):
-    return None if x is None else jnp.asarray(x)
 
 
 def speed_from_mm_per_min(rate_mm_per_min):
@@ -72,23 +69,23 @@ class Cable(eqx.Module):
         by its `covariate` argument (see [`jaxcable.pad_tests`][]). Any sign.
     """
 
-    length: Float[Array, "*batch"] = eqx.field(converter=jnp.asarray)
+    length: Float[Array, "*batch"] = eqx.field(converter=field_array)
     diameter: Float[Array, "*batch"] = eqx.field(
-        converter=jnp.asarray, default=DEFAULT_DIAMETER_MM * M_PER_MM
+        converter=field_array, default=DEFAULT_DIAMETER_MM * M_PER_MM
     )
     speed: Float[Array, "*batch"] = eqx.field(
-        converter=jnp.asarray, default=speed_from_mm_per_min(DEFAULT_RATE_MM_PER_MIN)
+        converter=field_array, default=speed_from_mm_per_min(DEFAULT_RATE_MM_PER_MIN)
     )
     breaking_load: Float[Array, "*batch"] = eqx.field(
-        converter=jnp.asarray, default=2000.0
+        converter=field_array, default=2000.0
     )
     temperature: Float[Array, "*batch"] = eqx.field(
-        converter=jnp.asarray, default=293.15
+        converter=field_array, default=293.15
     )
     # None unless set: a batch of cables built without it still vmaps (None has no
     # leaves to map), and models read None as 0.
     covariate: Float[Array, "*batch"] | None = eqx.field(
-        converter=_optional_array, default=None
+        converter=optional_field_array, default=None
     )
 
     def __check_init__(self):

@@ -53,6 +53,28 @@ def test_repeated_call_does_not_retrace():
     jc.simulate_force_history(other_model, other_cable, t, 60 * np.sin(t / 30) ** 2)
 
 
+def test_default_and_fitted_values_share_one_program():
+    # A fit gives strongly typed arrays (from its float parameter vector); a model or
+    # cable built from Python numbers must hold the same types, or `jit` compiles
+    # every kernel once for the defaults and again for fitted values
+    # (jaxcable/_arrays.py).
+    model = _traced_once()
+    fitted = eqx.tree_at(lambda m: m.E2c, model, jnp.asarray(np.asarray(model.E2c)))
+    assert fitted.E2c.dtype == model.E2c.dtype
+    jc.simulate_rate_test(model, CABLE, PROTOCOL)
+    cable = jc.Cable(length=jnp.asarray(np.asarray(0.1)), speed=CABLE.speed)
+    jc.simulate_rate_test(fitted, cable, PROTOCOL)
+    from jaxcable._models.registry import CLASSES_BY_NAME
+
+    for cls in CLASSES_BY_NAME.values():
+        try:
+            built = cls()
+        except TypeError:  # an extension needs the model it wraps
+            built = cls(jc.IntegratedModel())
+        for leaf in jax.tree_util.tree_leaves(built):
+            assert not (eqx.is_array(leaf) and leaf.weak_type), cls.__name__
+
+
 def test_one_scan_per_simulation():
     # The whole history is one lax.scan: no Python loop over samples unrolled in
     # the jaxpr (its size does not grow with the number of samples).

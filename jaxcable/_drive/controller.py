@@ -17,6 +17,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float, Int
 
 from .. import _checks
+from .._arrays import field_array
 from .._cable import Cable
 from .._models import (
     PIAO_TABLE3,
@@ -65,7 +66,7 @@ class LiveFiveElement(AbstractCableModel[FiveElementState]):
     """
 
     surface: ParameterSurface = PIAO_TABLE3
-    gravity: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=GRAVITY)
+    gravity: Float[Array, ""] = eqx.field(converter=field_array, default=GRAVITY)
     E_L2: Float[Array, ""] = table1_field("E_L2")
     E_L3: Float[Array, ""] = table1_field("E_L3")
     eta_L2: Float[Array, ""] = table1_field("eta_L2")

@@ -7,6 +7,7 @@ import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
 from .. import _checks
+from .._arrays import field_array
 
 
 class Protocol(eqx.Module):
@@ -28,10 +29,10 @@ class Protocol(eqx.Module):
     - `mask`: False for padding samples, which leave the state unchanged.
     """
 
-    force: Float[Array, " samples"] = eqx.field(converter=jnp.asarray)
-    direction: Int[Array, " samples"] = eqx.field(converter=jnp.asarray)
-    duration: Float[Array, " samples"] = eqx.field(converter=jnp.asarray)
-    mask: Bool[Array, " samples"] = eqx.field(converter=jnp.asarray)
+    force: Float[Array, " samples"] = eqx.field(converter=field_array)
+    direction: Int[Array, " samples"] = eqx.field(converter=field_array)
+    duration: Float[Array, " samples"] = eqx.field(converter=field_array)
+    mask: Bool[Array, " samples"] = eqx.field(converter=field_array)
 
     def __check_init__(self):
         shapes = {

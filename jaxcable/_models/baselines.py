@@ -12,6 +12,7 @@ import numpy as np
 from jaxtyping import Array, Float, Int
 
 from .. import _checks
+from .._arrays import field_array
 from .._cable import Cable
 from .._results import RESULTS
 from .base import AbstractCableModel, StrainParts, state_zero
@@ -40,7 +41,7 @@ class HookeModel(AbstractCableModel[HookeState]):
         [`jaxcable.IntegratedModel`][] default set for Dyneema SK78, 3 mm).
     """
 
-    E: Float[Array, "*batch"] = eqx.field(converter=jnp.asarray, default=2.2e9)
+    E: Float[Array, "*batch"] = eqx.field(converter=field_array, default=2.2e9)
 
     def __check_init__(self):
         _checks.check_parameters("HookeModel", self, ("E",))
@@ -116,10 +117,10 @@ class BurgersModel(AbstractCableModel[BurgersState]):
     eta0 = 1.6e11 Pa s.
     """
 
-    E1: Float[Array, "*batch"] = eqx.field(converter=jnp.asarray, default=2.2e9)
-    eta0: Float[Array, "*batch"] = eqx.field(converter=jnp.asarray, default=1.6e11)
-    E2: Float[Array, "*batch"] = eqx.field(converter=jnp.asarray, default=3.7e8)
-    eta2: Float[Array, "*batch"] = eqx.field(converter=jnp.asarray, default=3.7e10)
+    E1: Float[Array, "*batch"] = eqx.field(converter=field_array, default=2.2e9)
+    eta0: Float[Array, "*batch"] = eqx.field(converter=field_array, default=1.6e11)
+    E2: Float[Array, "*batch"] = eqx.field(converter=field_array, default=3.7e8)
+    eta2: Float[Array, "*batch"] = eqx.field(converter=field_array, default=3.7e10)
 
     def __check_init__(self):
         _checks.check_parameters("BurgersModel", self, _BURGERS_FIELDS)
@@ -302,15 +303,15 @@ class BoucWenModel(AbstractCableModel[BoucWenState]):
     sigma_y = 5e6 Pa (about 35 N), A = 1, beta = 0.6, gamma = 0.4, n = 1.
     """
 
-    E: Float[Array, "*batch"] = eqx.field(converter=jnp.asarray, default=2.2e9)
-    sigma_y: Float[Array, "*batch"] = eqx.field(converter=jnp.asarray, default=5e6)
-    z_y: Float[Array, "*batch"] = eqx.field(converter=jnp.asarray, default=2e-3)
-    A: Float[Array, "*batch"] = eqx.field(converter=jnp.asarray, default=1.0)
-    beta: Float[Array, "*batch"] = eqx.field(converter=jnp.asarray, default=0.6)
-    gamma: Float[Array, "*batch"] = eqx.field(converter=jnp.asarray, default=0.4)
-    n: Float[Array, "*batch"] = eqx.field(converter=jnp.asarray, default=1.0)
+    E: Float[Array, "*batch"] = eqx.field(converter=field_array, default=2.2e9)
+    sigma_y: Float[Array, "*batch"] = eqx.field(converter=field_array, default=5e6)
+    z_y: Float[Array, "*batch"] = eqx.field(converter=field_array, default=2e-3)
+    A: Float[Array, "*batch"] = eqx.field(converter=field_array, default=1.0)
+    beta: Float[Array, "*batch"] = eqx.field(converter=field_array, default=0.6)
+    gamma: Float[Array, "*batch"] = eqx.field(converter=field_array, default=0.4)
+    n: Float[Array, "*batch"] = eqx.field(converter=field_array, default=1.0)
     band: Float[Array, "*batch"] = eqx.field(
-        converter=jnp.asarray, default=DEFAULT_BAND
+        converter=field_array, default=DEFAULT_BAND
     )
     substeps: int = eqx.field(static=True, default=8)
 

@@ -20,6 +20,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float, Int
 
 from .. import _checks
+from .._arrays import field_array
 from .._cable import Cable
 from .._results import RESULTS
 from .base import AbstractCableModel, StrainParts, state_zero
@@ -329,18 +330,18 @@ class IntegratedModel(AbstractCableModel[IntegratedState]):
     # eps**gamma) makes the strain almost independent of the force.
     SOLVED_STRAIN_LIMIT: ClassVar[float] = 1.0
 
-    E1c: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=2.597e9)
-    beta: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.05465)
-    gamma: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=2.258)
-    E1r: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=2.63e9)
-    E2c: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=3.888e8)
-    t_c: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=8.251)
-    eta0: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=4.504e11)
-    E2r: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=3.709e9)
-    t_r1: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=35.88)
-    E3r: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=7.906e8)
-    lambda1: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.002825)
-    lambda2: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=-80.84)
+    E1c: Float[Array, ""] = eqx.field(converter=field_array, default=2.597e9)
+    beta: Float[Array, ""] = eqx.field(converter=field_array, default=0.05465)
+    gamma: Float[Array, ""] = eqx.field(converter=field_array, default=2.258)
+    E1r: Float[Array, ""] = eqx.field(converter=field_array, default=2.63e9)
+    E2c: Float[Array, ""] = eqx.field(converter=field_array, default=3.888e8)
+    t_c: Float[Array, ""] = eqx.field(converter=field_array, default=8.251)
+    eta0: Float[Array, ""] = eqx.field(converter=field_array, default=4.504e11)
+    E2r: Float[Array, ""] = eqx.field(converter=field_array, default=3.709e9)
+    t_r1: Float[Array, ""] = eqx.field(converter=field_array, default=35.88)
+    E3r: Float[Array, ""] = eqx.field(converter=field_array, default=7.906e8)
+    lambda1: Float[Array, ""] = eqx.field(converter=field_array, default=0.002825)
+    lambda2: Float[Array, ""] = eqx.field(converter=field_array, default=-80.84)
 
     def __check_init__(self):
         _checks.check_parameters("IntegratedModel", self, _POSITIVE)

@@ -15,6 +15,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float, Int
 
 from .. import _checks
+from .._arrays import field_array
 from .._cable import Cable
 from .._results import RESULTS
 from .base import AbstractCableModel, StrainParts, state_zero
@@ -38,7 +39,7 @@ eta_UL2, eta_UL3) set equal to them: the unloading table (Table 2) is lost."""
 
 def table1_field(name: str):
     """A model field (Pa or Pa s) whose default is Piao's Table 1 value `name`."""
-    return eqx.field(converter=jnp.asarray, default=PIAO_TABLE1[name])
+    return eqx.field(converter=field_array, default=PIAO_TABLE1[name])
 
 
 class FiveElementState(eqx.Module):
@@ -254,12 +255,12 @@ class FiveElementModel(AbstractCableModel[FiveElementState]):
     to simulate parameter sets.
     """
 
-    E_L1: Float[Array, "*batch"] = eqx.field(converter=jnp.asarray, default=2.2e14)
+    E_L1: Float[Array, "*batch"] = eqx.field(converter=field_array, default=2.2e14)
     E_L2: Float[Array, "*batch"] = table1_field("E_L2")
     E_L3: Float[Array, "*batch"] = table1_field("E_L3")
     eta_L2: Float[Array, "*batch"] = table1_field("eta_L2")
     eta_L3: Float[Array, "*batch"] = table1_field("eta_L3")
-    E_UL1: Float[Array, "*batch"] = eqx.field(converter=jnp.asarray, default=2.2e14)
+    E_UL1: Float[Array, "*batch"] = eqx.field(converter=field_array, default=2.2e14)
     E_UL2: Float[Array, "*batch"] = table1_field("E_UL2")
     E_UL3: Float[Array, "*batch"] = table1_field("E_UL3")
     eta_UL2: Float[Array, "*batch"] = table1_field("eta_UL2")

@@ -8,6 +8,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from .. import _checks
+from .._arrays import field_array
 from .piao import PIAO_TABLE1, FiveElementModel
 
 
@@ -34,7 +35,7 @@ class ParameterSurface(eqx.Module):
     - `first`: which variable is x, `"mass"` or `"length"` (static).
     """
 
-    coefficients: Float[Array, "*batch 9"] = eqx.field(converter=jnp.asarray)
+    coefficients: Float[Array, "*batch 9"] = eqx.field(converter=field_array)
     first: str = eqx.field(static=True, default="mass")
 
     def __check_init__(self):

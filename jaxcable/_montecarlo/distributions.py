@@ -10,6 +10,7 @@ import numpy as np
 from jaxtyping import Array, Float, PRNGKeyArray
 
 from .. import _checks
+from .._arrays import field_array
 
 
 class AbstractDistribution(eqx.Module):
@@ -56,8 +57,8 @@ class Normal(AbstractDistribution):
     - `std`: the standard deviation (>= 0), same unit.
     """
 
-    mean: Float[Array, ""] = eqx.field(converter=jnp.asarray)
-    std: Float[Array, ""] = eqx.field(converter=jnp.asarray)
+    mean: Float[Array, ""] = eqx.field(converter=field_array)
+    std: Float[Array, ""] = eqx.field(converter=field_array)
 
     def __check_init__(self):
         _require_scalar("Normal", "mean", self.mean)
@@ -82,8 +83,8 @@ class LogNormal(AbstractDistribution):
     - `sigma`: the standard deviation of log(x) (>= 0), dimensionless.
     """
 
-    median: Float[Array, ""] = eqx.field(converter=jnp.asarray)
-    sigma: Float[Array, ""] = eqx.field(converter=jnp.asarray)
+    median: Float[Array, ""] = eqx.field(converter=field_array)
+    sigma: Float[Array, ""] = eqx.field(converter=field_array)
 
     def __check_init__(self):
         _require_scalar("LogNormal", "median", self.median)
@@ -105,8 +106,8 @@ class Uniform(AbstractDistribution):
     - `low`, `high`: the bounds (low < high), in the parameter's unit.
     """
 
-    low: Float[Array, ""] = eqx.field(converter=jnp.asarray)
-    high: Float[Array, ""] = eqx.field(converter=jnp.asarray)
+    low: Float[Array, ""] = eqx.field(converter=field_array)
+    high: Float[Array, ""] = eqx.field(converter=field_array)
 
     def __check_init__(self):
         _require_scalar("Uniform", "low", self.low)

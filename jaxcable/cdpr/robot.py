@@ -11,6 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
+from .._arrays import field_array
 from .._cable import Cable
 from .._drive import GRAVITY
 from .._models import IntegratedModel
@@ -59,17 +60,17 @@ class Robot(eqx.Module):
     """
 
     pulleys: Float[Array, "n 3"] = eqx.field(
-        converter=jnp.asarray, default_factory=_default_pulleys
+        converter=field_array, default_factory=_default_pulleys
     )
-    routing: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=4.0)
-    platform_mass: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=20.0)
-    min_tension: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=10.0)
-    diameter: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=DIAMETER)
+    routing: Float[Array, ""] = eqx.field(converter=field_array, default=4.0)
+    platform_mass: Float[Array, ""] = eqx.field(converter=field_array, default=20.0)
+    min_tension: Float[Array, ""] = eqx.field(converter=field_array, default=10.0)
+    diameter: Float[Array, ""] = eqx.field(converter=field_array, default=DIAMETER)
     breaking_load: Float[Array, ""] = eqx.field(
-        converter=jnp.asarray, default=BREAKING_LOAD
+        converter=field_array, default=BREAKING_LOAD
     )
     strain_rate: Float[Array, ""] = eqx.field(
-        converter=jnp.asarray, default=STRAIN_RATE
+        converter=field_array, default=STRAIN_RATE
     )
 
     def __check_init__(self):

@@ -10,6 +10,7 @@ import jax.tree_util as jtu
 import numpy as np
 from jaxtyping import Array, Float, PRNGKeyArray
 
+from .._arrays import field_array
 from .._models import AbstractCableModel, IntegratedModel, TerminationCompliance
 from .._montecarlo import IndependentParameters, LogNormal
 from .robot import NOMINAL
@@ -21,9 +22,9 @@ class Scenario(eqx.Module):
     **Fields:** `time` (s, `(T,)`), `position` (m, `(T, 3)`), `payload` (kg, `(T,)`).
     """
 
-    time: Float[Array, " T"] = eqx.field(converter=jnp.asarray)
-    position: Float[Array, "T 3"] = eqx.field(converter=jnp.asarray)
-    payload: Float[Array, " T"] = eqx.field(converter=jnp.asarray)
+    time: Float[Array, " T"] = eqx.field(converter=field_array)
+    position: Float[Array, "T 3"] = eqx.field(converter=field_array)
+    payload: Float[Array, " T"] = eqx.field(converter=field_array)
 
     def __check_init__(self):
         T = jnp.shape(self.time)

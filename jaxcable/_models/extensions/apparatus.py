@@ -9,6 +9,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float, Int, PyTree
 
 from ... import _checks
+from ..._arrays import field_array
 from ..._cable import Cable
 from ..._results import RESULTS
 from ..base import (
@@ -56,7 +57,7 @@ class TerminationCompliance(AbstractExtension[PyTree]):
     FIT_INFO: ClassVar[dict[str, tuple]] = {"compliance": ("log", "m/N", -1.0)}
 
     base: AbstractCableModel
-    compliance: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.0)
+    compliance: Float[Array, ""] = eqx.field(converter=field_array, default=0.0)
 
     def __check_init__(self):
         _checks.check_parameters(
@@ -161,9 +162,9 @@ class BeddingIn(AbstractExtension[BeddingInState]):
     }
 
     base: AbstractCableModel
-    s_b: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.0)
-    F_b: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=50.0)
-    smoothing: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.01)
+    s_b: Float[Array, ""] = eqx.field(converter=field_array, default=0.0)
+    F_b: Float[Array, ""] = eqx.field(converter=field_array, default=50.0)
+    smoothing: Float[Array, ""] = eqx.field(converter=field_array, default=0.01)
 
     def __check_init__(self):
         _checks.check_parameters(
@@ -255,7 +256,7 @@ class SensorDrift(AbstractExtension[SensorDriftState]):
     FIT_INFO: ClassVar[dict[str, tuple]] = {"drift_rate": ("linear", "m/s")}
 
     base: AbstractCableModel
-    drift_rate: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.0)
+    drift_rate: Float[Array, ""] = eqx.field(converter=field_array, default=0.0)
 
     def __check_init__(self):
         _checks.check_parameters(

@@ -27,6 +27,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int, PyTree
 
 from ... import _checks
+from ..._arrays import field_array
 from ..._cable import Cable
 from ..._results import RESULTS
 from ..base import (
@@ -80,7 +81,7 @@ class CovariateStrain(AbstractExtension[CovariateStrainState]):
     FIT_INFO: ClassVar[dict[str, tuple]] = {"alpha": ("linear", "1/[c]")}
 
     base: AbstractCableModel
-    alpha: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.0)
+    alpha: Float[Array, ""] = eqx.field(converter=field_array, default=0.0)
 
     def __check_init__(self):
         _checks.check_parameters(
@@ -168,7 +169,7 @@ class MechanoSorptive(AbstractExtension[MechanoSorptiveState]):
     FIT_INFO: ClassVar[dict[str, tuple]] = {"m": ("linear", "1/(Pa [c])")}
 
     base: AbstractCableModel
-    m: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.0)
+    m: Float[Array, ""] = eqx.field(converter=field_array, default=0.0)
 
     def __check_init__(self):
         _checks.check_parameters(
@@ -246,8 +247,8 @@ class CovariateShift(AbstractExtension[PyTree]):
     FIT_INFO: ClassVar[dict[str, tuple]] = {"k": ("linear", "1/[c]")}
 
     base: AbstractCableModel
-    k: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.0)
-    c_ref: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.0)
+    k: Float[Array, ""] = eqx.field(converter=field_array, default=0.0)
+    c_ref: Float[Array, ""] = eqx.field(converter=field_array, default=0.0)
 
     def __check_init__(self):
         _checks.check_parameters(

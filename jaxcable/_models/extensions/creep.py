@@ -11,6 +11,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float, Int, PyTree
 
 from ... import _checks
+from ..._arrays import field_array
 from ..._cable import Cable
 from ..._results import RESULTS
 from ..base import (
@@ -129,7 +130,7 @@ class Hereditary(AbstractExtension[HereditaryState]):
     FIT_INFO: ClassVar[dict[str, tuple]] = {"weight": ("log", "-")}
 
     base: AbstractCableModel
-    weight: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=1.0)
+    weight: Float[Array, ""] = eqx.field(converter=field_array, default=1.0)
 
     def __check_init__(self):
         _checks.check_parameters(
@@ -245,8 +246,8 @@ class SecondRetardation(AbstractExtension[SecondRetardationState]):
     }
 
     base: AbstractCableModel
-    E_k: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=jnp.inf)
-    tau_k: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=1000.0)
+    E_k: Float[Array, ""] = eqx.field(converter=field_array, default=jnp.inf)
+    tau_k: Float[Array, ""] = eqx.field(converter=field_array, default=1000.0)
 
     def __check_init__(self):
         _checks.check_parameters(
@@ -374,9 +375,9 @@ class StressNonlinearCreep(AbstractExtension[StressNonlinearCreepState]):
     FIT_INFO: ClassVar[dict[str, tuple]] = {"n": ("log", "-")}
 
     base: AbstractCableModel
-    n: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.0)
+    n: Float[Array, ""] = eqx.field(converter=field_array, default=0.0)
     stress_ref: Float[Array, ""] = eqx.field(
-        converter=jnp.asarray, default=DEFAULT_STRESS_REF
+        converter=field_array, default=DEFAULT_STRESS_REF
     )
 
     def __check_init__(self):

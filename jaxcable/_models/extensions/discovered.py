@@ -15,6 +15,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float, Int, PyTree
 
 from ... import _checks
+from ..._arrays import field_array
 from ..._cable import Cable
 from ..._results import RESULTS
 from ..base import (
@@ -193,10 +194,10 @@ class DiscoveredTerm(AbstractExtension[DiscoveredTermState]):
     }
 
     base: AbstractCableModel
-    theta0: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.0)
-    theta1: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.0)
-    theta2: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.0)
-    theta3: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.0)
+    theta0: Float[Array, ""] = eqx.field(converter=field_array, default=0.0)
+    theta1: Float[Array, ""] = eqx.field(converter=field_array, default=0.0)
+    theta2: Float[Array, ""] = eqx.field(converter=field_array, default=0.0)
+    theta3: Float[Array, ""] = eqx.field(converter=field_array, default=0.0)
     terms: tuple[str, ...] = eqx.field(static=True, default=())
 
     def __check_init__(self):

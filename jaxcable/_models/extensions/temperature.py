@@ -11,6 +11,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int, PyTree
 
 from ... import _checks
+from ..._arrays import field_array
 from ..._cable import Cable
 from ..._results import RESULTS
 from ..base import AbstractCableModel, AbstractExtension, StrainParts
@@ -171,8 +172,8 @@ class TemperatureShift(AbstractTemperatureShift):
     FIT_INFO: ClassVar[dict[str, tuple]] = {"activation_energy": ("log", "J/mol")}
 
     base: AbstractCableModel
-    activation_energy: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.0)
-    T_ref: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=293.15)
+    activation_energy: Float[Array, ""] = eqx.field(converter=field_array, default=0.0)
+    T_ref: Float[Array, ""] = eqx.field(converter=field_array, default=293.15)
 
     def __check_init__(self):
         _checks.check_parameters(
@@ -231,9 +232,9 @@ class TemperatureShiftWLF(AbstractTemperatureShift):
     FIT_INFO: ClassVar[dict[str, tuple]] = {"c1": ("log", "-"), "c2": ("log", "K")}
 
     base: AbstractCableModel
-    c1: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=0.0)
-    c2: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=51.6)
-    T_ref: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=293.15)
+    c1: Float[Array, ""] = eqx.field(converter=field_array, default=0.0)
+    c2: Float[Array, ""] = eqx.field(converter=field_array, default=51.6)
+    T_ref: Float[Array, ""] = eqx.field(converter=field_array, default=293.15)
 
     def __check_init__(self):
         _checks.check_parameters(
