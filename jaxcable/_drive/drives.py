@@ -125,7 +125,8 @@ class _TimeProblem(eqx.Module):
 
 
 def _time_residual(dt, problem: _TimeProblem):
-    """Park Eq. 6 along one ramp: (model strain - crosshead strain), relative.
+    """Park Eq. 6 along one ramp: (model strain - crosshead strain), relative; with
+    the model's state and strain after the step (the solve's auxiliary output).
 
     The relative scale is fixed per sample (`_TimeProblem.scale`), not a function of
     `dt`: a `dt`-dependent scale such as |eps_kin(dt)| adds a term
@@ -137,14 +138,15 @@ def _time_residual(dt, problem: _TimeProblem):
     """
     s = problem.state
     rate = problem.cable.strain_rate
-    _, parts = problem.model.advance(
+    model_state, parts = problem.model.advance(
         s.model_state, problem.cable, dt, problem.force, problem.direction
     )
     ramp = problem.direction != 0
     sign = jnp.where(ramp, problem.direction, 1)
     kinematic = s.strain + sign * rate * dt
     hold = (dt - problem.duration) / (problem.duration + 1.0)
-    return jnp.where(ramp, (parts.total - kinematic) / problem.scale, hold)
+    residual = jnp.where(ramp, (parts.total - kinematic) / problem.scale, hold)
+    return residual, (model_state, parts)
 
 
 class RateDrive(AbstractDrive):
@@ -224,9 +226,10 @@ class RateDrive(AbstractDrive):
                 (2 * limit + jnp.abs(state.strain)) / cable.strain_rate,
                 jnp.inf,
             ),
+            has_aux=True,
         )
         dt = checkpoint_name(root.value, SOLUTION)
-        model_state, parts = model.advance(state.model_state, cable, dt, force, branch)
+        model_state, parts = root.aux
         kinematic = state.strain + sign * cable.strain_rate * dt
         miss = jnp.where(branch != 0, (parts.total - kinematic) / scale, 0.0)
         result = sample_result(
@@ -262,11 +265,14 @@ class _ForceProblem(eqx.Module):
 
 
 def _force_residual(force, problem: _ForceProblem):
+    """The relative strain error at `force`, with the model's state and strain
+    after the step (the solve's auxiliary output)."""
     s = problem.state
-    _, parts = problem.model.advance(
+    model_state, parts = problem.model.advance(
         s.model_state, problem.cable, problem.dt, force, problem.direction
     )
-    return (parts.total - problem.target) / (jnp.abs(problem.target) + _STRAIN_FLOOR)
+    scale = jnp.abs(problem.target) + _STRAIN_FLOOR
+    return (parts.total - problem.target) / scale, (model_state, parts)
 
 
 class ElongationDrive(AbstractDrive):
@@ -292,13 +298,16 @@ class ElongationDrive(AbstractDrive):
         # zero-force length and reached at a force > 0: the root that continues the
         # history (Newton's, from the previous force) wins over slack.
         zero = jnp.zeros_like(target)
-        slack = _force_residual(zero, problem) >= 0
+        r_zero, at_zero = _force_residual(zero, problem)
+        slack = r_zero >= 0
         # Initial guess from the local compliance at the previous force (Newton's
         # first step taken by hand with a floor, since the hardening law has zero
         # slope at 0 N).
         f_prev = jnp.maximum(state.force, 1e-3 * cable.breaking_load)
         r_prev, compliance = jax.jvp(
-            lambda f: _force_residual(f, problem), (f_prev,), (jnp.ones_like(f_prev),)
+            lambda f: _force_residual(f, problem)[0],
+            (f_prev,),
+            (jnp.ones_like(f_prev),),
         )
         guess = jnp.clip(
             f_prev - r_prev / compliance,
@@ -316,10 +325,13 @@ class ElongationDrive(AbstractDrive):
             growth=1e-6 * cable.breaking_load,
             active=_active(state, sample),
             name=SOLUTION,
+            has_aux=True,
         )
         unloaded = slack & ~root.converged
         force = checkpoint_name(jnp.where(unloaded, zero, root.value), SOLUTION)
-        model_state, parts = model.advance(state.model_state, cable, dt, force, branch)
+        model_state, parts = jax.tree_util.tree_map(
+            lambda a, b: jnp.where(unloaded, a, b), at_zero, root.aux
+        )
         miss = (parts.total - target) / (jnp.abs(target) + _STRAIN_FLOOR)
         result = sample_result(
             converged=unloaded | (root.converged & _verified(miss)), force=force

@@ -12,6 +12,8 @@ import optimistix as optx
 from jax.ad_checkpoint import checkpoint_name
 from jaxtyping import Array, Bool, Float, Int
 
+from .root_derivatives import aux_at_root, implicit_root, inexact
+
 
 class Newton(eqx.Module):
     """Newton–Raphson for the scalar root of each sample, built for the scan.
@@ -26,7 +28,7 @@ class Newton(eqx.Module):
     scan body, and a larger body costs more per sample than the loop's predicate,
     also under `vmap`, where the loop runs until every lane has converged.
     Derivatives are taken by the implicit function theorem with the slope of the
-    last Newton step (`_implicit_root`), never through the iterations.
+    last Newton step (`root_derivatives.implicit_root`), never through the iterations.
 
     Any optimistix root finder (e.g. `optx.Newton(rtol, atol)`) can be passed
     instead, where a simulation takes `solver=`; it runs through `optx.root_find`
@@ -80,14 +82,16 @@ _SEARCH_STEPS = 60
 
 
 class RootResult(eqx.Module):
-    """What `root_scalar` found: the root `value`, whether the solve `converged`, and
+    """What `root_scalar` found: the root `value`, whether the solve `converged`,
     `no_root`: where it did not converge, whether no residual it evaluated had the
     other sign (so no root was bracketed; a physical verdict on the problem, such as
-    a force out of reach, rather than a numerical failure)."""
+    a force out of reach, rather than a numerical failure), and `aux`: with
+    `has_aux`, fn's auxiliary output at the root (see `root_scalar`)."""
 
     value: Float[Array, ""]
     converged: Bool[Array, ""]
     no_root: Bool[Array, ""]
+    aux: Any = None
 
 
 class _Bracket(eqx.Module):
@@ -151,8 +155,9 @@ class _SolveState(eqx.Module):
     previous one (|residual| <= tol: converged), whether the iterate is `stuck` at
     `lower`, and the Newton `steps` taken. The fallback: the step `k` of the bracket
     search or of the bisection, and the last point that it evaluated (`y_end`, with
-    residual `r_end`). Both: the `bracket` of all points evaluated and the lane's
-    `phase`.
+    residual `r_end`). Both: the `bracket` of all points evaluated, the lane's
+    `phase`, and the last point evaluated (`y_eval`) with fn's auxiliary output
+    there (`aux`) and its derivative in y (`aux_t`; zero after the fallback).
     """
 
     y: Float[Array, ""]
@@ -165,48 +170,9 @@ class _SolveState(eqx.Module):
     k: Int[Array, ""]
     y_end: Float[Array, ""]
     r_end: Float[Array, ""]
-
-
-@eqx.filter_custom_jvp
-def _implicit_root(y, slope, args, *, fn):
-    """The root `y` of fn(., args), differentiated in `args` by the implicit function
-    theorem: dy = -(d fn / d args . dargs) / slope.
-
-    `slope` (d fn / dy) is the one the solve evaluated at its last Newton iterate
-    (within the tolerance of the root), so that a derivative costs one
-    differentiated evaluation of fn, not two (`jax.lax.custom_root` linearises fn in
-    y again at the root). Where it is NaN (a root found by bisection, which evaluates
-    no slopes) it is evaluated at the root here, in a loop that a batch without such
-    roots enters for one predicate only."""
-    del slope, args, fn
-    return y
-
-
-@_implicit_root.def_jvp
-def _implicit_root_jvp(primals, tangents, *, fn):
-    y, slope, args = primals
-    _, _, t_args = tangents
-    if t_args is None:
-        return y, None
-    # Only the differentiated leaves get tangents: the others stay symbolic zeros.
-    is_none = lambda x: x is None
-    diff = jax.tree_util.tree_map(
-        lambda t, a: None if t is None else a, t_args, args, is_leaf=is_none
-    )
-    rest = jax.tree_util.tree_map(
-        lambda t, a: a if t is None else None, t_args, args, is_leaf=is_none
-    )
-    _, rhs = jax.jvp(lambda d: fn(y, eqx.combine(d, rest)), (diff,), (t_args,))
-
-    def root_slope(c):
-        _, at_root = jax.jvp(lambda y: fn(y, args), (y,), (jnp.ones_like(y),))
-        return jnp.zeros_like(c[0]), at_root
-
-    _, slope = jax.lax.while_loop(lambda c: c[0], root_slope, (jnp.isnan(slope), slope))
-    # A zero slope only occurs where the caller discards the root (e.g. a slack
-    # cable); keep its tangent finite so that `jnp.where` does not leak NaNs.
-    bad = (slope == 0) | ~jnp.isfinite(slope)
-    return y, -rhs / jnp.where(bad, 1.0, slope)
+    y_eval: Float[Array, ""]
+    aux: Any
+    aux_t: Any
 
 
 def root_scalar(
@@ -220,6 +186,7 @@ def root_scalar(
     active: Bool[Array, ""] | None = None,
     upper: Float[Array, ""] | None = None,
     name: str | None = None,
+    has_aux: bool = False,
 ) -> RootResult:
     """Solve fn(y, args) = 0 for a scalar lower <= y <= upper.
 
@@ -258,7 +225,19 @@ def root_scalar(
     `name` (jaxcable's `Newton` only), where given, is the `checkpoint_name` of the
     root and of the slope its derivative uses: a rematerialised backward pass that
     saves that name then never repeats the solve.
+
+    `has_aux`: fn returns `(residual, aux)`, and `RootResult.aux` is aux at the
+    root (a drive's model state after the sample). jaxcable's `Newton` takes it
+    from the solve's last evaluation, to first order in the final refinement step
+    (`root_derivatives.aux_at_root`), instead of evaluating fn once more: on a CPU that last
+    evaluation was about a third of a rate-driven sample's time.
     """
+    if has_aux:
+        fn_aux = fn
+        fn = lambda y, args: fn_aux(y, args)[0]
+    else:
+        residual_fn = fn
+        fn_aux = lambda y, args: (residual_fn(y, args), None)
     if isinstance(solver, optx.AbstractRootFinder):
         if slope_sign is not None:
             guess = _past_turning_point(fn, guess, args, slope_sign, growth)
@@ -276,7 +255,8 @@ def root_scalar(
         y = sol.value
         seen = _Bracket.empty(y, slope_sign)
         seen = seen.see(guess, fn(guess, args)).see(y, fn(y, args))
-        return RootResult(y, converged, ~converged & ~seen.found)
+        aux = fn_aux(y, args)[1] if has_aux else None
+        return RootResult(y, converged, ~converged & ~seen.found, aux)
     if not isinstance(solver, Newton):
         raise ValueError(
             "`solver` must be a jaxcable.Newton or an optimistix root finder, got "
@@ -325,13 +305,29 @@ def root_scalar(
         return (s.steps < solver.max_steps) & live & ~done
 
     def newton(s: _SolveState, f) -> _SolveState:
-        r, slope = jax.jvp(f, (s.y,), (jnp.ones_like(s.y),))
+        (r, aux), (slope, aux_t) = jax.jvp(f, (s.y,), (jnp.ones_like(s.y),))
+        # Integer and boolean outputs have no derivative (float0): zeros of their
+        # own dtype, so that the loop's carry keeps one structure.
+        aux_t = jax.tree_util.tree_map(
+            lambda a, t: t if inexact(a) else jnp.zeros_like(a), aux, aux_t
+        )
         y, stuck = newton_step(s.y, r, slope)
         bracket = s.bracket.see(s.y, r)
         return eqx.tree_at(
-            lambda s: (s.y, s.residual, s.slope, s.bracket, s.stuck, s.steps),
+            lambda s: (
+                s.y,
+                s.residual,
+                s.slope,
+                s.bracket,
+                s.stuck,
+                s.steps,
+                s.y_eval,
+                s.aux,
+                s.aux_t,
+            ),
             s,
-            (y, r, slope, bracket, stuck, s.steps + 1),
+            (y, r, slope, bracket, stuck, s.steps + 1, s.y, aux, aux_t),
+            is_leaf=lambda x: x is None,
         )
 
     def settle(s: _SolveState) -> _SolveState:
@@ -363,11 +359,13 @@ def root_scalar(
             # otherwise get float64 iterates (2.0**k of an int is float64 there).
             y_search = lower + growth * ((2.0**s.k).astype(y.dtype) - 1.0)
             y = jnp.where(s.phase == _SEARCH, jnp.minimum(y_search, top), y)
-        r = f(y)
+        r, aux = f(y)
+        zero = jax.tree_util.tree_map(jnp.zeros_like, aux)
         s = eqx.tree_at(
-            lambda s: (s.bracket, s.k, s.y_end, s.r_end),
+            lambda s: (s.bracket, s.k, s.y_end, s.r_end, s.y_eval, s.aux, s.aux_t),
             s,
-            (s.bracket.see(y, r), s.k + 1, y, r),
+            (s.bracket.see(y, r), s.k + 1, y, r, y, aux, zero),
+            is_leaf=lambda x: x is None,
         )
         return settle(s)
 
@@ -380,7 +378,11 @@ def root_scalar(
         no = jnp.zeros_like(y0, dtype=bool)
         zero = jnp.zeros_like(y0, dtype=jnp.int32)
         bracket = _Bracket.empty(y0, slope_sign)
-        state = _SolveState(y0, inf, inf, bracket, no, 0, zero, zero, y0, inf)
+        shape = jax.eval_shape(lambda y: f(y)[1], y0)
+        aux0 = jax.tree_util.tree_map(lambda a: jnp.zeros(a.shape, a.dtype), shape)
+        state = _SolveState(
+            y0, inf, inf, bracket, no, 0, zero, zero, y0, inf, y0, aux0, aux0
+        )
         for _ in range(solver.unrolled):
             state = newton(state, f)
         state = jax.lax.while_loop(newton_on, lambda s: newton(s, f), state)
@@ -397,18 +399,24 @@ def root_scalar(
         # A lane with a bracket has bisected it (at least one step).
         bisected = failed & state.bracket.found
         y = jnp.where(bisected, state.y_end, y)
-        # A bisected root has no slope yet: `_implicit_root` evaluates it, only
+        # A bisected root has no slope yet: `root_derivatives.implicit_root` evaluates it, only
         # where it is differentiated.
         slope = jnp.where(bisected, jnp.nan, state.slope)
         ok = ok | (bisected & (jnp.abs(state.r_end) <= tol))
-        return y, slope, ok, no_root
+        # Where the solve failed, fn's output is taken where it was last evaluated.
+        y_eval = jnp.where(ok, state.y_eval, y)
+        return y, slope, ok, no_root, y_eval, state.aux, state.aux_t
 
     # The solve itself is never differentiated (nor are its start and bounds): the
-    # root's derivatives come from the implicit function theorem (`_implicit_root`).
+    # root's derivatives come from the implicit function theorem (`root_derivatives.implicit_root`).
     diff, static = eqx.partition(args, eqx.is_inexact_array)
     frozen = eqx.combine(jax.lax.stop_gradient(diff), static)
-    y, slope, ok, no_root = solve(lambda y: fn(y, frozen), jax.lax.stop_gradient(guess))
+    y, slope, ok, no_root, y_eval, aux, aux_t = solve(
+        lambda y: fn_aux(y, frozen), jax.lax.stop_gradient(guess)
+    )
     if name is not None:
         y, slope = checkpoint_name((y, slope), name)
-    y = _implicit_root(y, slope, args, fn=fn)
-    return RootResult(y, ok, no_root)
+    y = implicit_root(y, slope, args, fn=fn)
+    if has_aux:
+        aux = aux_at_root(y, y_eval, aux, aux_t, args, fn=fn_aux)
+    return RootResult(y, ok, no_root, aux if has_aux else None)

@@ -100,27 +100,48 @@ def loading_weight(
     return jnp.clip((x - centre + radius) / (2.0 * radius), 0.0, 1.0)
 
 
-# Below this h / tau the closed form loses digits to cancellation (relative error
-# ~2 eps tau / h); its Taylor series, sum_{k>=1} (-1)^(k+1) x^k / (k+1)!, truncated
-# after x^9, is exact to rounding there (next term ~5e-17 of the value).
-_SERIES_BELOW = 0.1
+# A Kelvin-Voigt element over a step of x = h / tau needs the decay less one,
+# expm1(-x), and the ramp factor R(x) = (x + expm1(-x)) / x. Both come from one
+# `exp` (XLA's `expm1` costs an exp, a log and a division; these run several times per
+# sample in every scan). Below `_series_below(dtype)`, R is its Taylor series
+# sum_{k>=1} (-1)^(k+1) x^k / (k+1)! (the closed form loses digits to cancellation
+# there, relative error ~ eps / (x R)) and expm1(-x) = x (R - 1) exactly; above it,
+# exp(-x) - 1 has no cancellation (relative error < eps / (1 - exp(-x)), 10 eps at
+# x = 0.1) and R's closed form is accurate to ~eps / (x R) (200 eps at x = 0.1, 35 eps
+# at 0.25). The series is truncated where its next term is below the dtype's
+# rounding of R: float64 after x^9 below 0.1 (next term < 3e-16 of R), float32 after
+# x^6 below 0.25 (< 2e-8 of R).
 _RAMP_SERIES = tuple((-1.0) ** (k + 1) / math.factorial(k + 1) for k in range(1, 10))
 
 
-def ramp_factor(x):
-    """1 - (1 - exp(-x)) / x = (x + expm1(-x)) / x, the share of a linear stress ramp
-    that a Kelvin-Voigt element has not yet followed after x = h / tau.
+def _series_below(dtype) -> tuple[float, tuple[float, ...]]:
+    """The threshold of the series and its coefficients, highest power first."""
+    if jnp.finfo(dtype).bits > 32:
+        return 0.1, tuple(reversed(_RAMP_SERIES))
+    return 0.25, tuple(reversed(_RAMP_SERIES[:6]))
 
-    Continued by its Taylor series near x = 0 so that the value (0 at x = 0) and its
-    gradient (1/2) stay finite there.
-    """
-    small = jnp.abs(x) < _SERIES_BELOW
+
+def relaxation_terms(x):
+    """(expm1(-x), R(x)) for x = h / tau >= 0, with one `exp`: the decay of a
+    Kelvin-Voigt element over the step, less one, and the ramp factor
+    R(x) = 1 - (1 - exp(-x)) / x, the share of a linear stress ramp that it has not
+    yet followed. Finite values and gradients at x = 0 (R(0) = 0, R'(0) = 1/2)."""
+    below, coefficients = _series_below(x.dtype)
+    small = jnp.abs(x) < below
     x_safe = jnp.where(small, 1.0, x)
-    direct = (x_safe + jnp.expm1(-x_safe)) / x_safe
+    decay_m1 = jnp.exp(-x_safe) - 1.0
     series = jnp.zeros_like(x)
-    for c in reversed(_RAMP_SERIES):  # Horner, highest power first
+    for c in coefficients:  # Horner
         series = (series + c) * x
-    return jnp.where(small, series, direct)
+    return (
+        jnp.where(small, x * (series - 1.0), decay_m1),
+        jnp.where(small, series, (x_safe + decay_m1) / x_safe),
+    )
+
+
+def ramp_factor(x):
+    """R(x) = 1 - (1 - exp(-x)) / x = (x + expm1(-x)) / x (see [`relaxation_terms`][])."""
+    return relaxation_terms(x)[1]
 
 
 def kelvin_voigt_step(q0, s0, s1, h, E, eta):
@@ -133,9 +154,8 @@ def kelvin_voigt_step(q0, s0, s1, h, E, eta):
     limit (q1 = q0) has finite values and gradients. Units: stress and E in Pa, eta in
     Pa s, h in s; q is a strain.
     """
-    x = h * E / eta
-    decay = jnp.exp(-x)
-    return decay * q0 + (-s0 * jnp.expm1(-x) + (s1 - s0) * ramp_factor(x)) / E
+    decay_m1, ramp = relaxation_terms(h * E / eta)
+    return q0 + decay_m1 * q0 + (-s0 * decay_m1 + (s1 - s0) * ramp) / E
 
 
 def safe_pow(base, exponent):
@@ -147,9 +167,11 @@ def safe_pow(base, exponent):
 
 def relaxation_average(t, tau):
     """(1 - exp(-t / tau)) / t, continued by 1 / tau at t = 0 (finite gradients)."""
-    positive = t > 0
-    t_safe = jnp.where(positive, t, 1.0)
-    return jnp.where(positive, -jnp.expm1(-t_safe / tau) / t_safe, 1.0 / tau)
+    x = t / tau
+    decay_m1, ramp = relaxation_terms(x)
+    # (1 - R) / tau while R is small; -expm1(-x) / t where 1 - R would cancel (large x).
+    small = x < 1.0
+    return jnp.where(small, (1.0 - ramp) / tau, -decay_m1 / jnp.where(small, 1.0, t))
 
 
 def retarded(q0, target0, target1, dt, tau):
@@ -158,11 +180,7 @@ def retarded(q0, target0, target1, dt, tau):
     piecewise-linear input); finite values and gradients at dt = 0.
 
     q1 = a q0 + (1 - a) target0 + (target1 - target0) (1 - (tau / dt)(1 - a)),
-    a = exp(-dt / tau).
+    a = exp(-dt / tau), written with the one transcendental expm1(-dt / tau) = a - 1.
     """
-    x = dt / tau
-    return (
-        jnp.exp(-x) * q0
-        - jnp.expm1(-x) * target0
-        + (target1 - target0) * ramp_factor(x)
-    )
+    decay_m1, ramp = relaxation_terms(dt / tau)
+    return q0 + decay_m1 * (q0 - target0) + (target1 - target0) * ramp

@@ -22,8 +22,8 @@ from ..base import (
     state_zero,
 )
 from ..kernels import (
-    ramp_factor,
     relaxation_average,
+    relaxation_terms,
     running_max,
     safe_pow,
     tension_time_step,
@@ -174,10 +174,12 @@ class Hereditary(AbstractExtension[HereditaryState]):
         dt_tension = tension_time_step(state.force, force, dt, cable, force_max)
         t_total = state.t_total + dt_tension
         # Exact Kelvin-Voigt update for a force linear over the step (x = dt / t_c).
-        x = dt_tension / inner.t_c
+        decay_m1, ramp = relaxation_terms(dt_tension / inner.t_c)
         compliance = 1.0 / (inner.E2c * area)
-        kelvin_voigt = jnp.exp(-x) * state.kelvin_voigt + compliance * (
-            -state.force * jnp.expm1(-x) + (force - state.force) * ramp_factor(x)
+        kelvin_voigt = (
+            state.kelvin_voigt
+            + decay_m1 * state.kelvin_voigt
+            + compliance * (-state.force * decay_m1 + (force - state.force) * ramp)
         )
         equivalent = impulse * relaxation_average(t_total, inner.t_c) * compliance
         parts = add_parts(parts, creep=self.weight * (kelvin_voigt - equivalent))
@@ -287,15 +289,17 @@ class SecondRetardation(AbstractExtension[SecondRetardationState]):
         direction: Int[Array, ""],
     ) -> tuple[SecondRetardationState, StrainParts]:
         base_state, parts = self.base.advance(state.base, cable, dt, force, direction)
-        x = dt / self.tau_k
+        decay_m1, ramp = relaxation_terms(dt / self.tau_k)
         # 0 for E_k = inf, with tangents 0 too: inf times a zero tangent of the
         # area (the elongation drive's implicit derivative carries one) is NaN.
         off = jnp.isinf(self.E_k)
         compliance = jnp.where(
             off, 0.0, 1.0 / (jnp.where(off, 1.0, self.E_k) * cable.area)
         )
-        strain = jnp.exp(-x) * state.strain + compliance * (
-            -state.force * jnp.expm1(-x) + (force - state.force) * ramp_factor(x)
+        strain = (
+            state.strain
+            + decay_m1 * state.strain
+            + compliance * (-state.force * decay_m1 + (force - state.force) * ramp)
         )
         parts = add_parts(parts, creep=strain)
         return SecondRetardationState(base_state, force, strain), parts

@@ -1,0 +1,100 @@
+"""How a root solved by `newton.root_scalar` is differentiated: the root by the
+implicit function theorem ([`implicit_root`][]), the solve's auxiliary output at the
+root as fn's output there ([`aux_at_root`][]); never through the iterations."""
+
+from typing import Any
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+
+def _split(t_args, args) -> tuple[Any, Any]:
+    """`args` split into its differentiated leaves (those with a tangent in `t_args`)
+    and the rest, so that only the differentiated ones get tangents (the others
+    stay symbolic zeros)."""
+    is_none = lambda x: x is None
+    diff = jax.tree_util.tree_map(
+        lambda t, a: None if t is None else a, t_args, args, is_leaf=is_none
+    )
+    rest = jax.tree_util.tree_map(
+        lambda t, a: a if t is None else None, t_args, args, is_leaf=is_none
+    )
+    return diff, rest
+
+
+@eqx.filter_custom_jvp
+def implicit_root(y, slope, args, *, fn):
+    """The root `y` of fn(., args), differentiated in `args` by the implicit function
+    theorem: dy = -(d fn / d args . dargs) / slope.
+
+    `slope` (d fn / dy) is the one the solve evaluated at its last Newton iterate
+    (within the tolerance of the root), so that a derivative costs one
+    differentiated evaluation of fn, not two (`jax.lax.custom_root` linearises fn in
+    y again at the root). Where it is NaN (a root found by bisection, which evaluates
+    no slopes) it is evaluated at the root here, in a loop that a batch without such
+    roots enters for one predicate only."""
+    del slope, args, fn
+    return y
+
+
+@implicit_root.def_jvp
+def _implicit_root_jvp(primals, tangents, *, fn):
+    y, slope, args = primals
+    _, _, t_args = tangents
+    if t_args is None:
+        return y, None
+    diff, rest = _split(t_args, args)
+    _, rhs = jax.jvp(lambda d: fn(y, eqx.combine(d, rest)), (diff,), (t_args,))
+
+    def root_slope(c):
+        _, at_root = jax.jvp(lambda y: fn(y, args), (y,), (jnp.ones_like(y),))
+        return jnp.zeros_like(c[0]), at_root
+
+    _, slope = jax.lax.while_loop(lambda c: c[0], root_slope, (jnp.isnan(slope), slope))
+    # A zero slope only occurs where the caller discards the root (e.g. a slack
+    # cable); keep its tangent finite so that `jnp.where` does not leak NaNs.
+    bad = (slope == 0) | ~jnp.isfinite(slope)
+    return y, -rhs / jnp.where(bad, 1.0, slope)
+
+
+def inexact(x) -> bool:
+    """Whether `x` has a floating (or complex) dtype, so that it has derivatives."""
+    return jnp.issubdtype(jnp.result_type(x), jnp.inexact)
+
+
+@eqx.filter_custom_jvp
+def aux_at_root(y, y_eval, aux, aux_t, args, *, fn):
+    """fn's auxiliary output at the root `y`, from the solve's last evaluation at
+    `y_eval`: aux + aux_t (y - y_eval), to first order.
+
+    `y - y_eval` is the refinement step of a converged solve (a residual within the
+    tolerance: the second-order term is ~tol^2 relative, below rounding) or 0 (a
+    bisected root, a failed solve), so this is fn's auxiliary output at the root
+    without evaluating fn again. Differentiated as fn's auxiliary output at y itself
+    (in y and `args`): a derivative costs the evaluation that the primal saved."""
+    del args, fn
+    return _extrapolate(y, y_eval, aux, aux_t)
+
+
+def _extrapolate(y, y_eval, aux, aux_t):
+    step = y - y_eval
+    return jax.tree_util.tree_map(
+        lambda a, t: a + t * step if inexact(a) else a, aux, aux_t
+    )
+
+
+@aux_at_root.def_jvp
+def _aux_at_root_jvp(primals, tangents, *, fn):
+    y, y_eval, aux, aux_t, args = primals
+    t_y, _, _, _, t_args = tangents
+    primal = _extrapolate(y, y_eval, aux, aux_t)
+    t_y = jnp.zeros_like(y) if t_y is None else t_y
+    if t_args is None:
+        _, tangent = jax.jvp(lambda y: fn(y, args)[1], (y,), (t_y,))
+        return primal, tangent
+    diff, rest = _split(t_args, args)
+    _, tangent = jax.jvp(
+        lambda y, d: fn(y, eqx.combine(d, rest))[1], (y, diff), (t_y, t_args)
+    )
+    return primal, tangent
