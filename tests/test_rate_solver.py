@@ -147,3 +147,41 @@ def test_root_derivative_is_implicit_on_newton_and_bisected_lanes():
     np.testing.assert_allclose(alone, 1.0, rtol=1e-8)
     # The guess does not move the root.
     assert by_guess == 0.0
+
+
+def test_state_at_the_root_is_the_model_at_the_solved_times():
+    # The rate and elongation drives take the model's state after a sample from the
+    # solve's last evaluation, moved to the root to first order
+    # (`root_derivatives.aux_at_root`), instead of running the model once more. The
+    # same model driven by the solved (time, force) history must give the same
+    # strain split at every sample, to ~tol^2: here, float64, 1e-12 of the peak.
+    protocol = jc.Protocol.concatenate(
+        jc.Protocol.cycles(80.0, 2, 40), jc.Protocol.rest(600.0, samples=5)
+    )
+    for model in (
+        jc.IntegratedModel(),
+        jc.IntegratedModel(E2r=5e8, t_r1=2.0),
+        jc.FiveElementModel(E_L1=3e10, E_UL1=3e10),
+        jc.BurgersModel(),
+        jc.BoucWenModel(),
+    ):
+        name = type(model).__name__
+        rate = jc.simulate_rate_test(model, CABLE, protocol)
+        assert rate.result == jc.RESULTS.successful, name
+        again = jc.simulate_force_history(model, CABLE, rate.time, rate.force)
+        peak = float(np.max(np.abs(rate.strain)))
+        for field in ("instantaneous", "creep", "recovery_short", "recovery_long"):
+            np.testing.assert_allclose(
+                getattr(again.parts, field),
+                getattr(rate.parts, field),
+                rtol=0,
+                atol=1e-12 * peak,
+                err_msg=f"{name} {field}",
+            )
+        # The elongation drive solves the force of each sample of the same history.
+        elong = jc.simulate_elongation_history(model, CABLE, rate.time, rate.elongation)
+        assert elong.result == jc.RESULTS.successful, name
+        forward = jc.simulate_force_history(model, CABLE, elong.time, elong.force)
+        np.testing.assert_allclose(
+            forward.strain, elong.strain, rtol=0, atol=1e-12 * peak, err_msg=name
+        )
