@@ -1,6 +1,6 @@
 """`python -m jaxcable`: the same as the `jaxcable` command."""
 
-from ._cli import main
+from ._cli import entry
 
 
-raise SystemExit(main())
+entry()

@@ -1,4 +1,5 @@
 import contextlib
+import importlib
 import io
 import json
 import re
@@ -848,3 +849,28 @@ def test_every_model_simulates_a_protocol(tmp_path, name):
     data = jc.read_csv(out)
     assert data.num_samples == _equivalent_protocol().num_samples
     assert np.all(np.isfinite(data.elongation)) and data.metadata["model"] == name
+
+
+def test_console_entry_freezes_the_imports_and_exits_with_mains_status(monkeypatch):
+    # `jaxcable` and `python -m jaxcable` run `entry`: it freezes the objects of the
+    # imports (the collector then skips them), then exits with main's status.
+    cli_main = importlib.import_module("jaxcable._cli.main")
+    calls = []
+    monkeypatch.setattr(cli_main.gc, "freeze", lambda: calls.append("freeze"))
+    monkeypatch.setattr(cli_main, "main", lambda: calls.append("main") or 2)
+    with pytest.raises(SystemExit) as exit_:
+        cli_main.entry()
+    assert exit_.value.code == 2
+    assert calls == ["freeze", "main"]
+
+
+def test_python_dash_m_reports_bad_input_with_status_2(tmp_path):
+    missing = tmp_path / "missing.csv"
+    run = subprocess.run(
+        [sys.executable, "-m", "jaxcable", "fit", str(missing), "--out", "p.json"],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+    )
+    assert run.returncode == 2
+    assert "missing.csv" in run.stderr and "Traceback" not in run.stderr

@@ -1,3 +1,4 @@
 from .main import (
+    entry as entry,
     main as main,
 )

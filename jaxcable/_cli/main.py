@@ -5,6 +5,7 @@ stderr saying what is wrong and where; a simulation or fit that fails exits with
 status 1.
 """
 
+import gc
 import sys
 from collections.abc import Sequence
 
@@ -51,6 +52,21 @@ def main(argv: Sequence[str] | None = None) -> int:
         where = e.filename if e.filename is not None else "file"
         _report(f"{where}: {e.strerror or e}.")
         return 2
+
+
+def entry() -> None:
+    """The `jaxcable` console script and `python -m jaxcable`: [`main`][] on the
+    process's arguments, exiting with its status.
+
+    First it freezes the objects that importing jax and jaxcable created (modules,
+    classes, the compiler's bindings: they live as long as the process), so that the
+    cyclic garbage collector, run by the allocations of tracing and loading
+    programs, no longer rescans them. Measured on a 2-core CPU: a warm `jaxcable
+    fit` of the bundled data, median of 7, 2.40 s -> 2.03 s. Only here, not in
+    `main`, which a test or a script may call many times in one process.
+    """
+    gc.freeze()
+    raise SystemExit(main())
 
 
 def _report(message) -> None:
