@@ -95,8 +95,11 @@ def test_sizes_as_documented(datasets, base):
             hold = k * (f - hidden_effects.F_SLIP) * 2 * 3600
             assert 0.8 * hold < a[-1] < 1.5 * hold
             assert np.all(np.diff(a) >= -1e-12)
-            # Slips only above the threshold.
-            assert np.all(np.diff(a)[(above[1:] == 0) & (above[:-1] == 0)] == 0)
+            # Slips only above the threshold: below it the two simulations agree to
+            # rounding (a solve's state at its root is the last evaluation's moved
+            # by its derivative, or the model at the root: equal to ~1e-18 m).
+            below = (above[1:] == 0) & (above[:-1] == 0)
+            assert np.all(np.abs(np.diff(a)[below]) <= 1e-15)
     # Cyclic softening: s n F L0 / EA_REF; at the last peak n is about 3.5 cycles.
     s = papers.OUT_OF_CATALOGUE["cyclic_softening"]["size"]
     for (length, _, f, _), a in zip(

@@ -155,9 +155,8 @@ class _SolveState(eqx.Module):
     previous one (|residual| <= tol: converged), whether the iterate is `stuck` at
     `lower`, and the Newton `steps` taken. The fallback: the step `k` of the bracket
     search or of the bisection, and the last point that it evaluated (`y_end`, with
-    residual `r_end`). Both: the `bracket` of all points evaluated, the lane's
-    `phase`, and the last point evaluated (`y_eval`) with fn's auxiliary output
-    there (`aux`) and its derivative in y (`aux_t`; zero after the fallback).
+    residual `r_end`). Both: the `bracket` of all points evaluated and the lane's
+    `phase`.
     """
 
     y: Float[Array, ""]
@@ -170,9 +169,6 @@ class _SolveState(eqx.Module):
     k: Int[Array, ""]
     y_end: Float[Array, ""]
     r_end: Float[Array, ""]
-    y_eval: Float[Array, ""]
-    aux: Any
-    aux_t: Any
 
 
 def root_scalar(
@@ -227,10 +223,13 @@ def root_scalar(
     saves that name then never repeats the solve.
 
     `has_aux`: fn returns `(residual, aux)`, and `RootResult.aux` is aux at the
-    root (a drive's model state after the sample). jaxcable's `Newton` takes it
-    from the solve's last evaluation, to first order in the final refinement step
-    (`root_derivatives.aux_at_root`), instead of evaluating fn once more: on a CPU that last
-    evaluation was about a third of a rate-driven sample's time.
+    root (a drive's model state after the sample). Where the last unrolled Newton
+    step converged (most samples), jaxcable's `Newton` takes it from that
+    evaluation, to first order in the final refinement step
+    (`root_derivatives.aux_at_root`), instead of evaluating fn once more (on a CPU
+    that evaluation was about a third of a rate-driven sample's time); elsewhere fn
+    is evaluated at the root, in a loop that a batch of such samples only enters
+    for one predicate.
     """
     if has_aux:
         fn_aux = fn
@@ -304,31 +303,24 @@ def root_scalar(
         done = (jnp.abs(s.residual) <= tol) | s.stuck
         return (s.steps < solver.max_steps) & live & ~done
 
-    def newton(s: _SolveState, f) -> _SolveState:
-        (r, aux), (slope, aux_t) = jax.jvp(f, (s.y,), (jnp.ones_like(s.y),))
-        # Integer and boolean outputs have no derivative (float0): zeros of their
-        # own dtype, so that the loop's carry keeps one structure.
-        aux_t = jax.tree_util.tree_map(
-            lambda a, t: t if inexact(a) else jnp.zeros_like(a), aux, aux_t
-        )
+    def newton(s: _SolveState, f, with_aux: bool = False):
+        # With `with_aux`, also fn's auxiliary output at the evaluated point and its
+        # derivative in y (integer and boolean outputs: zeros of their own dtype).
+        if with_aux:
+            (r, aux), (slope, aux_t) = jax.jvp(f, (s.y,), (jnp.ones_like(s.y),))
+            aux_t = jax.tree_util.tree_map(
+                lambda a, t: t if inexact(a) else jnp.zeros_like(a), aux, aux_t
+            )
+        else:
+            r, slope = jax.jvp(lambda y: f(y)[0], (s.y,), (jnp.ones_like(s.y),))
         y, stuck = newton_step(s.y, r, slope)
         bracket = s.bracket.see(s.y, r)
-        return eqx.tree_at(
-            lambda s: (
-                s.y,
-                s.residual,
-                s.slope,
-                s.bracket,
-                s.stuck,
-                s.steps,
-                s.y_eval,
-                s.aux,
-                s.aux_t,
-            ),
+        new = eqx.tree_at(
+            lambda s: (s.y, s.residual, s.slope, s.bracket, s.stuck, s.steps),
             s,
-            (y, r, slope, bracket, stuck, s.steps + 1, s.y, aux, aux_t),
-            is_leaf=lambda x: x is None,
+            (y, r, slope, bracket, stuck, s.steps + 1),
         )
+        return (new, (s.y, aux, aux_t)) if with_aux else new
 
     def settle(s: _SolveState) -> _SolveState:
         # Move each lane of the fallback on to its next phase once its current one
@@ -359,13 +351,11 @@ def root_scalar(
             # otherwise get float64 iterates (2.0**k of an int is float64 there).
             y_search = lower + growth * ((2.0**s.k).astype(y.dtype) - 1.0)
             y = jnp.where(s.phase == _SEARCH, jnp.minimum(y_search, top), y)
-        r, aux = f(y)
-        zero = jax.tree_util.tree_map(jnp.zeros_like, aux)
+        r = f(y)[0]
         s = eqx.tree_at(
-            lambda s: (s.bracket, s.k, s.y_end, s.r_end, s.y_eval, s.aux, s.aux_t),
+            lambda s: (s.bracket, s.k, s.y_end, s.r_end),
             s,
-            (s.bracket.see(y, r), s.k + 1, y, r, y, aux, zero),
-            is_leaf=lambda x: x is None,
+            (s.bracket.see(y, r), s.k + 1, y, r),
         )
         return settle(s)
 
@@ -378,13 +368,19 @@ def root_scalar(
         no = jnp.zeros_like(y0, dtype=bool)
         zero = jnp.zeros_like(y0, dtype=jnp.int32)
         bracket = _Bracket.empty(y0, slope_sign)
+        state = _SolveState(y0, inf, inf, bracket, no, 0, zero, zero, y0, inf)
         shape = jax.eval_shape(lambda y: f(y)[1], y0)
-        aux0 = jax.tree_util.tree_map(lambda a: jnp.zeros(a.shape, a.dtype), shape)
-        state = _SolveState(
-            y0, inf, inf, bracket, no, 0, zero, zero, y0, inf, y0, aux0, aux0
-        )
-        for _ in range(solver.unrolled):
-            state = newton(state, f)
+        aux = jax.tree_util.tree_map(lambda a: jnp.zeros(a.shape, a.dtype), shape)
+        y_eval, aux_t = y0, aux
+        for i in range(solver.unrolled):
+            if i < solver.unrolled - 1:
+                state = newton(state, f)
+            else:
+                state, (y_eval, aux, aux_t) = newton(state, f, with_aux=True)
+        # Where the last unrolled evaluation was within the tolerance, the root is
+        # that point plus one refinement step, and fn's output there follows from
+        # the evaluation's (`aux_at_root`).
+        fresh = (jnp.abs(state.residual) <= tol) & (solver.unrolled > 0)
         state = jax.lax.while_loop(newton_on, lambda s: newton(s, f), state)
         y, bracket = state.y, state.bracket
         ok = (jnp.abs(state.residual) <= tol) & jnp.isfinite(y)
@@ -399,13 +395,27 @@ def root_scalar(
         # A lane with a bracket has bisected it (at least one step).
         bisected = failed & state.bracket.found
         y = jnp.where(bisected, state.y_end, y)
-        # A bisected root has no slope yet: `root_derivatives.implicit_root` evaluates it, only
-        # where it is differentiated.
+        # A bisected root has no slope yet: `root_derivatives.implicit_root`
+        # evaluates it, only where it is differentiated.
         slope = jnp.where(bisected, jnp.nan, state.slope)
         ok = ok | (bisected & (jnp.abs(state.r_end) <= tol))
-        # Where the solve failed, fn's output is taken where it was last evaluated.
-        y_eval = jnp.where(ok, state.y_eval, y)
-        return y, slope, ok, no_root, y_eval, state.aux, state.aux_t
+        # Elsewhere (the loops' roots, a lane that is not live) fn's output is
+        # evaluated at y, in a loop that a batch whose roots are all fresh enters for
+        # one predicate only; a lane that is not live keeps the unrolled one.
+        fresh = fresh & ~bisected & jnp.isfinite(y)
+        y_eval = jnp.where(fresh, y_eval, y)
+        aux_t = jax.tree_util.tree_map(
+            lambda t: jnp.where(fresh, t, jnp.zeros_like(t)), aux_t
+        )
+
+        if has_aux:
+
+            def at_root(c):
+                return jnp.zeros_like(fresh), f(y)[1]
+
+            need = ~fresh & live
+            _, aux = jax.lax.while_loop(lambda c: c[0], at_root, (need, aux))
+        return y, slope, ok, no_root, y_eval, aux, aux_t
 
     # The solve itself is never differentiated (nor are its start and bounds): the
     # root's derivatives come from the implicit function theorem (`root_derivatives.implicit_root`).
