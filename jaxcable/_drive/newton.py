@@ -411,10 +411,16 @@ def root_scalar(
         if has_aux:
 
             def at_root(c):
-                return jnp.zeros_like(fresh), f(y)[1]
+                passes, _ = c
+                # y + 0 * passes is y, but depends on the loop's carry: evaluated at
+                # y itself, the model is loop-invariant, and XLA hoists it out of
+                # the loop onto every sample (measured in the optimised HLO).
+                return passes + 1, f(y + 0 * passes)[1]
 
             need = ~fresh & live
-            _, aux = jax.lax.while_loop(lambda c: c[0], at_root, (need, aux))
+            _, aux = jax.lax.while_loop(
+                lambda c: need & (c[0] == 0), at_root, (jnp.zeros_like(y), aux)
+            )
         return y, slope, ok, no_root, y_eval, aux, aux_t
 
     # The solve itself is never differentiated (nor are its start and bounds): the
