@@ -48,10 +48,17 @@ def _implicit_root_jvp(primals, tangents, *, fn):
     _, rhs = jax.jvp(lambda d: fn(y, eqx.combine(d, rest)), (diff,), (t_args,))
 
     def root_slope(c):
-        _, at_root = jax.jvp(lambda y: fn(y, args), (y,), (jnp.ones_like(y),))
-        return jnp.zeros_like(c[0]), at_root
+        passes, _ = c
+        # At y + 0 * passes, not at y: a loop-invariant evaluation is hoisted out of
+        # the loop by XLA and would run on every sample (see `newton.root_scalar`).
+        at = y + 0 * passes
+        _, at_root = jax.jvp(lambda y: fn(y, args), (at,), (jnp.ones_like(y),))
+        return passes + 1, at_root
 
-    _, slope = jax.lax.while_loop(lambda c: c[0], root_slope, (jnp.isnan(slope), slope))
+    need = jnp.isnan(slope)
+    _, slope = jax.lax.while_loop(
+        lambda c: need & (c[0] == 0), root_slope, (jnp.zeros_like(y), slope)
+    )
     # A zero slope only occurs where the caller discards the root (e.g. a slack
     # cable); keep its tangent finite so that `jnp.where` does not leak NaNs.
     bad = (slope == 0) | ~jnp.isfinite(slope)
