@@ -51,7 +51,7 @@ _STRAIN_FLOOR = 1e-4
 # F_on = max(this share of the breaking load, this fraction of the largest force).
 _TENSION_SHARE = 1e-4
 _TENSION_FRACTION = 0.1
-# As jaxcable._models.kernels.ramp_factor: its Taylor series below this x.
+# As jaxcable._models.kernels.relaxation_terms in float64: its Taylor series below this x.
 _SERIES_BELOW = 0.1
 
 

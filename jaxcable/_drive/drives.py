@@ -26,6 +26,7 @@ from .state import (
     direction,
     init_state,
     sample_result,
+    select,
     solved_result,
     strain_limit,
 )
@@ -329,9 +330,7 @@ class ElongationDrive(AbstractDrive):
         )
         unloaded = slack & ~root.converged
         force = checkpoint_name(jnp.where(unloaded, zero, root.value), SOLUTION)
-        model_state, parts = jax.tree_util.tree_map(
-            lambda a, b: jnp.where(unloaded, a, b), at_zero, root.aux
-        )
+        model_state, parts = select(unloaded, at_zero, root.aux)
         miss = (parts.total - target) / (jnp.abs(target) + _STRAIN_FLOOR)
         result = sample_result(
             converged=unloaded | (root.converged & _verified(miss)), force=force

@@ -12,7 +12,7 @@ import optimistix as optx
 from jax.ad_checkpoint import checkpoint_name
 from jaxtyping import Array, Bool, Float, Int
 
-from .root_derivatives import aux_at_root, implicit_root, inexact
+from .root_derivatives import aux_at_root, evaluate_where, implicit_root, inexact
 
 
 class Newton(eqx.Module):
@@ -409,18 +409,7 @@ def root_scalar(
         )
 
         if has_aux:
-
-            def at_root(c):
-                passes, _ = c
-                # y + 0 * passes is y, but depends on the loop's carry: evaluated at
-                # y itself, the model is loop-invariant, and XLA hoists it out of
-                # the loop onto every sample (measured in the optimised HLO).
-                return passes + 1, f(y + 0 * passes)[1]
-
-            need = ~fresh & live
-            _, aux = jax.lax.while_loop(
-                lambda c: need & (c[0] == 0), at_root, (jnp.zeros_like(y), aux)
-            )
+            aux = evaluate_where(~fresh & live, lambda y: f(y)[1], y, aux)
         return y, slope, ok, no_root, y_eval, aux, aux_t
 
     # The solve itself is never differentiated (nor are its start and bounds): the

@@ -47,22 +47,32 @@ def _implicit_root_jvp(primals, tangents, *, fn):
     diff, rest = _split(t_args, args)
     _, rhs = jax.jvp(lambda d: fn(y, eqx.combine(d, rest)), (diff,), (t_args,))
 
-    def root_slope(c):
-        passes, _ = c
-        # At y + 0 * passes, not at y: a loop-invariant evaluation is hoisted out of
-        # the loop by XLA and would run on every sample (see `newton.root_scalar`).
-        at = y + 0 * passes
-        _, at_root = jax.jvp(lambda y: fn(y, args), (at,), (jnp.ones_like(y),))
-        return passes + 1, at_root
+    def root_slope(y):
+        return jax.jvp(lambda y: fn(y, args), (y,), (jnp.ones_like(y),))[1]
 
-    need = jnp.isnan(slope)
-    _, slope = jax.lax.while_loop(
-        lambda c: need & (c[0] == 0), root_slope, (jnp.zeros_like(y), slope)
-    )
+    slope = evaluate_where(jnp.isnan(slope), root_slope, y, slope)
     # A zero slope only occurs where the caller discards the root (e.g. a slack
     # cable); keep its tangent finite so that `jnp.where` does not leak NaNs.
     bad = (slope == 0) | ~jnp.isfinite(slope)
     return y, -rhs / jnp.where(bad, 1.0, slope)
+
+
+def evaluate_where(need, f, y, otherwise):
+    """`f(y)` where `need`, `otherwise` elsewhere: f runs in a loop that a batch
+    (under `vmap`) enters only when some lane needs it, and then once.
+
+    f is evaluated at y + 0 * passes rather than at y: at y itself it would be
+    loop-invariant, and XLA hoists loop-invariant code out of the loop onto every
+    call (seen in the optimised HLO of the rate-driven scan)."""
+
+    def body(c):
+        passes, _ = c
+        return passes + 1, f(y + 0 * passes)
+
+    _, out = jax.lax.while_loop(
+        lambda c: need & (c[0] == 0), body, (jnp.zeros_like(y), otherwise)
+    )
+    return out
 
 
 def inexact(x) -> bool:
@@ -97,10 +107,7 @@ def _aux_at_root_jvp(primals, tangents, *, fn):
     t_y, _, _, _, t_args = tangents
     primal = _extrapolate(y, y_eval, aux, aux_t)
     t_y = jnp.zeros_like(y) if t_y is None else t_y
-    if t_args is None:
-        _, tangent = jax.jvp(lambda y: fn(y, args)[1], (y,), (t_y,))
-        return primal, tangent
-    diff, rest = _split(t_args, args)
+    diff, rest = (None, args) if t_args is None else _split(t_args, args)
     _, tangent = jax.jvp(
         lambda y, d: fn(y, eqx.combine(d, rest))[1], (y, diff), (t_y, t_args)
     )

@@ -164,7 +164,8 @@ def solved_result(
     )
 
 
-def _select(pred, new, old):
+def select(pred, new, old):
+    """`new` where `pred`, else `old`, leaf by leaf (two pytrees of one structure)."""
     return jtu.tree_map(lambda a, b: jnp.where(pred, a, b), new, old)
 
 
@@ -211,4 +212,4 @@ def commit(
     # Padding samples repeat the last strain; its split is not needed bit-exact.
     z = jnp.zeros_like(parts.instantaneous)
     old_parts = StrainParts(state.strain, z, z, z)
-    return _select(mask, new, state), _select(mask, parts, old_parts)
+    return select(mask, new, state), select(mask, parts, old_parts)

@@ -139,11 +139,6 @@ def relaxation_terms(x):
     )
 
 
-def ramp_factor(x):
-    """R(x) = 1 - (1 - exp(-x)) / x = (x + expm1(-x)) / x (see [`relaxation_terms`][])."""
-    return relaxation_terms(x)[1]
-
-
 def kelvin_voigt_step(q0, s0, s1, h, E, eta):
     """Exact strain of a Kelvin-Voigt element (spring E parallel to dashpot eta) after a
     step of length h over which the stress goes linearly from s0 to s1.
