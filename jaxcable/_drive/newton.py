@@ -12,7 +12,13 @@ import optimistix as optx
 from jax.ad_checkpoint import checkpoint_name
 from jaxtyping import Array, Bool, Float, Int
 
-from .root_derivatives import aux_at_root, evaluate_where, implicit_root, inexact
+from .root_derivatives import (
+    aux_at_root,
+    evaluate_where,
+    implicit_root,
+    inexact,
+    loop_tied,
+)
 
 
 class Newton(eqx.Module):
@@ -359,11 +365,14 @@ def root_scalar(
         )
         return settle(s)
 
-    def solve(f, y0):
+    def solve(g, args, y0):
         # The first `unrolled` Newton steps, Newton's loop, then one loop for the
         # search and the bisection of the lanes that Newton's method left
         # unconverged: one loop instead of two costs a batch whose solves all
-        # converge one predicate (and its carry) less per sample.
+        # converge one predicate (and its carry) less per sample. Inside the loops
+        # fn's arguments are tied to the loop's counter (`loop_tied`), so that what
+        # does not depend on y is computed in the iterations taken, not hoisted.
+        f = lambda y: g(y, args)
         inf = jnp.full_like(y0, jnp.inf)
         no = jnp.zeros_like(y0, dtype=bool)
         zero = jnp.zeros_like(y0, dtype=jnp.int32)
@@ -381,7 +390,11 @@ def root_scalar(
         # that point plus one refinement step, and fn's output there follows from
         # the evaluation's (`aux_at_root`).
         fresh = (jnp.abs(state.residual) <= tol) & (solver.unrolled > 0)
-        state = jax.lax.while_loop(newton_on, lambda s: newton(s, f), state)
+        state = jax.lax.while_loop(
+            newton_on,
+            lambda s: newton(s, lambda y: g(y, loop_tied(args, s.steps))),
+            state,
+        )
         y, bracket = state.y, state.bracket
         ok = (jnp.abs(state.residual) <= tol) & jnp.isfinite(y)
         failed = live & ~ok
@@ -389,7 +402,9 @@ def root_scalar(
             lambda s: s.phase, state, jnp.where(failed, _SEARCH, _DONE) + zero
         )
         state = jax.lax.while_loop(
-            lambda s: s.phase != _DONE, lambda s: fallback(s, f), settle(state)
+            lambda s: s.phase != _DONE,
+            lambda s: fallback(s, lambda y: g(y, loop_tied(args, s.k))),
+            settle(state),
         )
         no_root = failed & ~state.bracket.found
         # A lane with a bracket has bisected it (at least one step).
@@ -409,7 +424,7 @@ def root_scalar(
         )
 
         if has_aux:
-            aux = evaluate_where(~fresh & live, lambda y: f(y)[1], y, aux)
+            aux = evaluate_where(~fresh & live, lambda y, a: g(y, a)[1], y, args, aux)
         return y, slope, ok, no_root, y_eval, aux, aux_t
 
     # The solve itself is never differentiated (nor are its start and bounds): the
@@ -417,7 +432,7 @@ def root_scalar(
     diff, static = eqx.partition(args, eqx.is_inexact_array)
     frozen = eqx.combine(jax.lax.stop_gradient(diff), static)
     y, slope, ok, no_root, y_eval, aux, aux_t = solve(
-        lambda y: fn_aux(y, frozen), jax.lax.stop_gradient(guess)
+        fn_aux, frozen, jax.lax.stop_gradient(guess)
     )
     if name is not None:
         y, slope = checkpoint_name((y, slope), name)

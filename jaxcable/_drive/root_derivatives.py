@@ -47,32 +47,52 @@ def _implicit_root_jvp(primals, tangents, *, fn):
     diff, rest = _split(t_args, args)
     _, rhs = jax.jvp(lambda d: fn(y, eqx.combine(d, rest)), (diff,), (t_args,))
 
-    def root_slope(y):
+    def root_slope(y, args):
         return jax.jvp(lambda y: fn(y, args), (y,), (jnp.ones_like(y),))[1]
 
-    slope = evaluate_where(jnp.isnan(slope), root_slope, y, slope)
+    slope = evaluate_where(jnp.isnan(slope), root_slope, y, args, slope)
     # A zero slope only occurs where the caller discards the root (e.g. a slack
     # cable); keep its tangent finite so that `jnp.where` does not leak NaNs.
     bad = (slope == 0) | ~jnp.isfinite(slope)
     return y, -rhs / jnp.where(bad, 1.0, slope)
 
 
-def evaluate_where(need, f, y, otherwise):
-    """`f(y)` where `need`, `otherwise` elsewhere: f runs in a loop that a batch
-    (under `vmap`) enters only when some lane needs it, and then once.
+def evaluate_where(need, f, y, args, otherwise):
+    """`f(y, args)` where `need`, `otherwise` elsewhere: f runs in a loop that a
+    batch (under `vmap`) enters only when some lane needs it, and then once.
 
-    f is evaluated at y + 0 * passes rather than at y: at y itself it would be
-    loop-invariant, and XLA hoists loop-invariant code out of the loop onto every
-    call (seen in the optimised HLO of the rate-driven scan)."""
+    y and args enter the loop tied to its counter ([`loop_tied`][]): XLA would
+    otherwise hoist f out of the loop onto every call."""
 
     def body(c):
         passes, _ = c
-        return passes + 1, f(y + 0 * passes)
+        return passes + 1, f(*loop_tied((y, args), passes))
 
     _, out = jax.lax.while_loop(
         lambda c: need & (c[0] == 0), body, (jnp.zeros_like(y), otherwise)
     )
     return out
+
+
+def loop_tied(tree, counter):
+    """`tree`, its floating leaves made to depend on a loop's `counter` without
+    changing a bit (x * (1 + 0 k), which keeps the sign of a zero).
+
+    Inside a `lax.while_loop`, code that depends on loop-invariant values only (in a
+    rate-driven sample: the hardening powers of Park's step, which depend on the
+    state and the force but not on the solved time) is hoisted by XLA out of the
+    loop, so it runs on every call of the enclosing scan step even when the loop
+    runs no iteration; once per loop, in a step with three loops (seen in the
+    optimised HLO). Tied to the counter, it runs only in the iterations that are
+    taken. `0 k` is computed in floating point, which XLA does not fold to 0."""
+    counter = jnp.asarray(counter)
+
+    def tie(x):
+        if not (eqx.is_array(x) and inexact(x)):
+            return x
+        return x * (1 + 0 * counter.astype(x.dtype))
+
+    return jax.tree_util.tree_map(tie, tree)
 
 
 def inexact(x) -> bool:
