@@ -24,11 +24,12 @@ test: $(STAMP)
 	# processes also because late in one long process XLA's CPU compiler crashed
 	# (SIGSEGV, SIGABRT) on a fresh clone; each half of the suite alone passes.
 	# tests/conftest.py compiles with XLA's faster-compiling CPU emitters when this jaxlib
-	# has them; `make test-xla-default` runs the same suite with XLA's default emitters.
+	# has them, and with the scans' loops as single kernels (jaxcable.enable_cpu_loop_kernels,
+	# as the command line); `make test-xla-default` runs the same suite with XLA's defaults.
 	$(BIN)/pytest -q --durations=25 -n $(WORKERS) --dist loadgroup tests
 
 test-xla-default: $(STAMP)
-	JAXCABLE_TEST_XLA_EMITTERS=default $(BIN)/pytest -q --durations=25 -n $(WORKERS) --dist loadgroup tests
+	JAXCABLE_TEST_XLA_EMITTERS=default JAXCABLE_TEST_LOOP_KERNELS=off $(BIN)/pytest -q --durations=25 -n $(WORKERS) --dist loadgroup tests
 
 lint: $(STAMP)
 	$(BIN)/ruff check .

@@ -88,6 +88,11 @@ def _parse():
     p.add_argument("--repeats", type=int, default=5)
     p.add_argument("--problems", default="small,large,realistic")
     p.add_argument("--json-out", default=None)
+    p.add_argument(
+        "--loop-kernels",
+        action="store_true",
+        help="compile the scans' loops as single CPU kernels (jaxcable.enable_cpu_loop_kernels, as the command line does)",
+    )
     return p.parse_args()
 
 
@@ -349,6 +354,8 @@ def _run(name, repeats):
 
 def main():
     args = _parse()
+    if args.loop_kernels:
+        jc.enable_cpu_loop_kernels()
     reports = [_run(name, args.repeats) for name in args.problems.split(",")]
     try:
         load = os.getloadavg()
@@ -367,6 +374,7 @@ def main():
             scipy=scipy.__version__,
             jaxcable=jc.__version__,
             openblas_threads=os.environ.get("OPENBLAS_NUM_THREADS"),
+            xla_flags=os.environ.get("XLA_FLAGS", ""),
         ),
         repeats=args.repeats,
     )

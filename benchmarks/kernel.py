@@ -24,6 +24,11 @@ def _parse():
     p.add_argument("--batches", default="1,16,64,256,1024")
     p.add_argument("--repeats", type=int, default=5)
     p.add_argument("--x64", action="store_true", help="run in float64")
+    p.add_argument(
+        "--loop-kernels",
+        action="store_true",
+        help="compile the scans' loops as single CPU kernels (jaxcable.enable_cpu_loop_kernels, as the command line does)",
+    )
     p.add_argument("--json-out", default=None)
     return p.parse_args()
 
@@ -50,6 +55,8 @@ def main():
 
     import jaxcable as jc
 
+    if args.loop_kernels:
+        jc.enable_cpu_loop_kernels()
     model = jc.IntegratedModel()
     protocol = jc.Protocol.cycles(
         100.0, 1, samples_per_ramp=args.samples // 2, start=False
@@ -113,6 +120,8 @@ def main():
             backend=jax.default_backend(),
             devices=[str(d) for d in jax.devices()],
             dtype="float64" if args.x64 else "float32",
+            loop_kernels=args.loop_kernels,
+            xla_flags=os.environ.get("XLA_FLAGS", ""),
             load_average_at_start=load_at_start,
             load_average_at_end=list(os.getloadavg()),
         ),

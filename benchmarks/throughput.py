@@ -32,6 +32,11 @@ import jax
 def _parse():
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--x64", action="store_true", help="run the kernel in float64")
+    p.add_argument(
+        "--loop-kernels",
+        action="store_true",
+        help="compile the scans' loops as single CPU kernels (jaxcable.enable_cpu_loop_kernels, as the command line does)",
+    )
     p.add_argument("--samples", type=int, default=2000)
     p.add_argument("--batches", default="1,4,16,64,256,1024,4096")
     p.add_argument("--lengths", default="100,1000,10000,100000,1000000")
@@ -56,6 +61,7 @@ def _machine(dtype, load_at_start):
         backend=jax.default_backend(),
         devices=[str(d) for d in jax.devices()],
         dtype=dtype,
+        xla_flags=os.environ.get("XLA_FLAGS", ""),
     )
 
 
@@ -85,6 +91,8 @@ def main():
 
     import jaxcable as jc
 
+    if args.loop_kernels:
+        jc.enable_cpu_loop_kernels()
     sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
     from numpy_baseline import default_parameters, simulate_rate_test_numpy
 

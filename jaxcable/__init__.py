@@ -5,6 +5,7 @@ from ._cache import (
     clear_compilation_cache as clear_compilation_cache,
     enable_compilation_cache as enable_compilation_cache,
 )
+from ._cpu_loops import enable_cpu_loop_kernels as enable_cpu_loop_kernels
 from ._diagnose import (
     Candidate as Candidate,
     Diagnosis as Diagnosis,

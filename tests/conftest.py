@@ -79,6 +79,17 @@ if TEST_CACHE is not None:
     # Every program: the suite's many small kernels add up.
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
 
+import jaxcable  # noqa: E402
+
+
+# The scans' loops compiled as single CPU kernels, as the command line compiles them
+# (`jaxcable.enable_cpu_loop_kernels`: before the first computation; the workers,
+# notebooks' kernels and subprocesses inherit XLA_FLAGS). tests/test_cpu_loops.py
+# checks that XLA's default gives the same results. JAXCABLE_TEST_LOOP_KERNELS=off
+# keeps XLA's default (`make test-xla-default`).
+if os.environ.get("JAXCABLE_TEST_LOOP_KERNELS", "on") != "off":
+    jaxcable.enable_cpu_loop_kernels()
+
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 SHARED = pathlib.Path(os.environ.get("JAXCABLE_SHARED", ROOT.parent / "shared"))
 DATA = SHARED / "data"
@@ -151,7 +162,8 @@ def _rank(item: pytest.Item) -> int:
 
 def pytest_report_header(config):
     return (
-        f"XLA CPU emitters: {os.environ[TEST_EMITTERS_ENV]} "
+        f"XLA CPU emitters: {os.environ[TEST_EMITTERS_ENV]}, loop kernels "
+        f"{os.environ.get('JAXCABLE_TEST_LOOP_KERNELS', 'on')} "
         f"(XLA_FLAGS={os.environ.get('XLA_FLAGS', '')!r})"
     )
 

@@ -14,7 +14,16 @@ MAX_LINES = 500
 # Folders (and base modules) from the bottom layer up: a module may import only from
 # its own layer or below.
 LAYERS = [
-    {"_arrays", "_cable", "_results", "_checks", "_progress", "_cache", "_files"},
+    {
+        "_arrays",
+        "_cable",
+        "_results",
+        "_checks",
+        "_progress",
+        "_cache",
+        "_cpu_loops",
+        "_files",
+    },
     {"_models"},
     {"_drive"},
     {"_io"},

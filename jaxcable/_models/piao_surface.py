@@ -12,6 +12,16 @@ from .._arrays import field_array
 from .piao import PIAO_TABLE1, FiveElementModel
 
 
+def _coefficients(x):
+    # A NumPy array stays on the host until the surface is evaluated: the preset
+    # below is built when jaxcable is imported, and a JAX array there would start
+    # JAX's backend, after which XLA_FLAGS are no longer read
+    # (`jaxcable.enable_cpu_loop_kernels`).
+    if isinstance(x, np.ndarray) and np.issubdtype(x.dtype, np.floating):
+        return x
+    return field_array(x)
+
+
 class ParameterSurface(eqx.Module):
     """A model parameter as a cubic polynomial of payload mass and cable length (Piao
     Eq. 5).
@@ -35,7 +45,7 @@ class ParameterSurface(eqx.Module):
     - `first`: which variable is x, `"mass"` or `"length"` (static).
     """
 
-    coefficients: Float[Array, "*batch 9"] = eqx.field(converter=field_array)
+    coefficients: Float[Array, "*batch 9"] = eqx.field(converter=_coefficients)
     first: str = eqx.field(static=True, default="mass")
 
     def __check_init__(self):

@@ -1,0 +1,119 @@
+"""XLA's CPU option that compiles a small while loop as one kernel, for the scans.
+
+On a CPU, XLA runs a program as a sequence of kernels (its "thunks"), one for each
+fused operation, and a `lax.scan` runs its body's kernels one after the other on
+every iteration, at roughly 50 ns each. A rate-driven sample of jaxcable's kernel is
+about 100 of them (the model's step, Newton's method and its loops), so one cable's
+simulation is that dispatch, not arithmetic. XLA can instead compile a while loop
+whose buffers are small into one kernel (`xla_cpu_small_while_loop_byte_threshold`,
+1024 bytes by default): the whole scan of one cable then runs as compiled code.
+Measured on a 2-core CPU (`benchmarks/kernel.py`, benchmarks/README.md): one cable
+x 2000 rate-driven samples 10.6 ms -> 0.7 ms, its gradient 25.6 ms -> 1.3 ms, and
+both compile faster.
+
+The option is an XLA flag (`XLA_FLAGS`), read once, when JAX starts its CPU backend
+(the first computation of a process); it cannot be scoped to one program. So the
+library never sets it by itself: the command line does, and a script or notebook can
+with [`jaxcable.enable_cpu_loop_kernels`][] before its first computation (importing
+jaxcable computes nothing).
+"""
+
+import os
+
+
+# The flag, as XLA's CPU backend reads it from `--xla_backend_extra_options`.
+_OPTION = "xla_cpu_small_while_loop_byte_threshold"
+_EXTRA = "--xla_backend_extra_options="
+# 16 MiB: the scan of one cable (its stacked outputs are the loop's largest
+# buffers: 2000 samples take about 0.1 MB), and the Newton loops of a batch of
+# 1024 cables, which need between 2 and 4 MB (measured: at 2 MB a 1024-cable
+# forward kept its 85-108 ms, at 4 MB 65 ms, at 16 MB 58-67 ms). The scan of such a
+# batch (its outputs are 10^2 MB) stays a loop of kernels, which XLA can spread
+# over the cores.
+DEFAULT_LOOP_KERNEL_BYTES = 1 << 24
+# The command line's switch to leave XLA's default.
+NO_LOOP_KERNELS_ENV = "JAXCABLE_NO_LOOP_KERNELS"
+
+
+def _backend_started() -> bool:
+    try:
+        from jax._src import xla_bridge
+
+        return bool(xla_bridge.backends_are_initialized())
+    except (ImportError, AttributeError):
+        # A jax without this (private) query: asking for the devices would start
+        # the backend, so assume it has not; the flag then at worst does nothing.
+        return False
+
+
+def with_loop_kernel_option(flags: str, byte_threshold: int) -> str:
+    """`flags` (an `XLA_FLAGS` value) with the loop threshold added, merged into an
+    `--xla_backend_extra_options` already there; a threshold already set is kept."""
+    words = flags.split()
+    for i, word in enumerate(words):
+        if word.startswith(_EXTRA):
+            options = word[len(_EXTRA) :]
+            if _OPTION in options:
+                return flags
+            joined = f"{options},{_OPTION}={byte_threshold}" if options else None
+            words[i] = _EXTRA + (joined or f"{_OPTION}={byte_threshold}")
+            return " ".join(words)
+    return " ".join(words + [f"{_EXTRA}{_OPTION}={byte_threshold}"])
+
+
+def enable_cpu_loop_kernels(byte_threshold: int = DEFAULT_LOOP_KERNEL_BYTES) -> str:
+    """Let XLA compile each while loop (a scan) whose buffers fit in `byte_threshold`
+    bytes as one CPU kernel, for the rest of this process.
+
+    Adds `--xla_backend_extra_options=xla_cpu_small_while_loop_byte_threshold=N` to
+    the `XLA_FLAGS` environment variable, which JAX reads when it starts its CPU
+    backend: call it before the first computation (importing jaxcable computes
+    nothing). A threshold already in `XLA_FLAGS` is kept. Results are the same
+    computation, compiled differently: in float64 within rounding of XLA's default
+    (tested), on other backends nothing changes.
+
+    **Arguments:**
+
+    - `byte_threshold`: the largest total size, in bytes, of a loop's buffers for it
+        to become one kernel (default 16 MiB: one cable's scan, and the Newton
+        loops of up to a few thousand cables).
+
+    **Returns:**
+
+    The `XLA_FLAGS` now in effect.
+
+    **Raises:**
+
+    `RuntimeError` when JAX's backend has already started (the flag would do
+    nothing), and `ValueError` for a threshold that is not a positive integer.
+    """
+    if isinstance(byte_threshold, bool) or not isinstance(byte_threshold, int):
+        raise ValueError(
+            f"`byte_threshold` must be a positive integer (bytes), got {byte_threshold!r}."
+        )
+    if byte_threshold <= 0:
+        raise ValueError(
+            f"`byte_threshold` must be a positive integer (bytes), got {byte_threshold}."
+        )
+    if _backend_started():
+        raise RuntimeError(
+            "enable_cpu_loop_kernels: JAX's backend has already started, so XLA_FLAGS "
+            "are read already; call it before the first computation of the process."
+        )
+    flags = with_loop_kernel_option(os.environ.get("XLA_FLAGS", ""), byte_threshold)
+    os.environ["XLA_FLAGS"] = flags
+    return flags
+
+
+def loop_kernels_disabled() -> bool:
+    """True when `$JAXCABLE_NO_LOOP_KERNELS` is set to anything but `""` or `"0"`."""
+    return os.environ.get(NO_LOOP_KERNELS_ENV, "") not in ("", "0")
+
+
+def try_enable_cpu_loop_kernels() -> bool:
+    """[`enable_cpu_loop_kernels`][] with its default, where it can still take effect
+    (the command line's start); whether it did."""
+    if _backend_started():
+        return False
+    enable_cpu_loop_kernels()
+    return True

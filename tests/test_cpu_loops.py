@@ -1,0 +1,138 @@
+"""`jaxcable.enable_cpu_loop_kernels`: XLA's option that compiles small while loops as
+single CPU kernels, which the command line and this suite turn on."""
+
+import json
+import os
+import subprocess
+import sys
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxcable as jc
+from jaxcable._cpu_loops import (
+    NO_LOOP_KERNELS_ENV,
+    loop_kernels_disabled,
+    try_enable_cpu_loop_kernels,
+    with_loop_kernel_option,
+)
+
+
+_OPTION = "xla_cpu_small_while_loop_byte_threshold"
+
+
+@pytest.mark.parametrize(
+    "flags, expected",
+    [
+        ("", f"--xla_backend_extra_options={_OPTION}=64"),
+        (
+            "--xla_cpu_use_fusion_emitters=false",
+            f"--xla_cpu_use_fusion_emitters=false "
+            f"--xla_backend_extra_options={_OPTION}=64",
+        ),
+        # Merged into an extra-options flag already there (a second one would
+        # replace it).
+        (
+            "--xla_backend_extra_options=xla_cpu_disable_loop_unrolling",
+            f"--xla_backend_extra_options=xla_cpu_disable_loop_unrolling,{_OPTION}=64",
+        ),
+        # The caller's own threshold is kept.
+        (
+            f"--xla_backend_extra_options={_OPTION}=5",
+            f"--xla_backend_extra_options={_OPTION}=5",
+        ),
+    ],
+)
+def test_the_flag_is_added_once_and_merged(flags, expected):
+    assert with_loop_kernel_option(flags, 64) == expected
+
+
+@pytest.mark.parametrize("bad", [0, -1, 1.5, True, "1024", None])
+def test_bad_threshold_names_the_argument(bad):
+    with pytest.raises(ValueError, match="byte_threshold"):
+        jc.enable_cpu_loop_kernels(bad)
+
+
+def test_after_the_first_computation_it_says_so():
+    jnp.zeros(()).block_until_ready()
+    before = os.environ.get("XLA_FLAGS")
+    with pytest.raises(RuntimeError, match="before the first computation"):
+        jc.enable_cpu_loop_kernels()
+    assert os.environ.get("XLA_FLAGS") == before
+    # The command line's form does nothing there instead of failing.
+    assert try_enable_cpu_loop_kernels() is False
+
+
+def test_the_command_line_switch(monkeypatch):
+    for value, disabled in [("", False), ("0", False), ("1", True), ("yes", True)]:
+        monkeypatch.setenv(NO_LOOP_KERNELS_ENV, value)
+        assert loop_kernels_disabled() is disabled
+
+
+# One script, run in fresh interpreters: does importing jaxcable start JAX's backend,
+# and the float64 results of the three drives and a gradient, with and without the
+# loop kernels.
+_SCRIPT = r"""
+import json, sys
+import jax
+jax.config.update("jax_enable_x64", True)
+import jax.numpy as jnp
+import numpy as np
+import jaxcable as jc
+from jax._src import xla_bridge
+started_by_import = xla_bridge.backends_are_initialized()
+flags = jc.enable_cpu_loop_kernels() if sys.argv[1] == "on" else None
+model = jc.IntegratedModel()
+protocol = jc.Protocol.cycles(100.0, 2, samples_per_ramp=60, start=False)
+cable = jc.Cable(length=0.3, speed=5e-3 / 60)
+rate = jc.simulate_rate_test(model, cable, protocol)
+elong = jc.simulate_elongation_history(model, cable, rate.time, rate.elongation)
+force = jc.simulate_force_history(model, cable, rate.time, rate.force)
+def loss(E1c):
+    m = jc.IntegratedModel(E1c=E1c)
+    return jnp.sum(jc.simulate_rate_test(m, cable, protocol).elongation ** 2)
+grad = jax.grad(loss)(jnp.asarray(model.E1c))
+print(json.dumps(dict(
+    started_by_import=started_by_import, flags=flags,
+    rate=np.asarray(rate.elongation).tolist(), time=np.asarray(rate.time).tolist(),
+    elong=np.asarray(elong.force).tolist(), force=np.asarray(force.elongation).tolist(),
+    grad=float(grad))))
+"""
+
+
+def _run(mode):
+    env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
+    done = subprocess.run(
+        [sys.executable, "-c", _SCRIPT, mode],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert done.returncode == 0, done.stderr[-2000:]
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+@pytest.fixture(scope="module")
+def both():
+    return _run("off"), _run("on")
+
+
+def test_importing_jaxcable_computes_nothing(both):
+    # Otherwise XLA_FLAGS set after `import jaxcable` would be ignored.
+    default, loops = both
+    assert default["started_by_import"] is False
+    assert loops["started_by_import"] is False
+    assert loops["flags"] == f"--xla_backend_extra_options={_OPTION}=16777216"
+
+
+def test_loop_kernels_give_xla_defaults_results(both):
+    # XLA's default (no XLA_FLAGS at all) against the loop kernels: the same float64
+    # computation, compiled differently, so equal to rounding.
+    default, loops = both
+    for key in ("time", "rate", "elong", "force"):
+        a, b = np.asarray(default[key]), np.asarray(loops[key])
+        assert a.shape == b.shape and np.all(np.isfinite(b))
+        np.testing.assert_allclose(b, a, rtol=0, atol=1e-12 * np.max(np.abs(a)))
+    np.testing.assert_allclose(loops["grad"], default["grad"], rtol=1e-10)
