@@ -26,6 +26,7 @@ retardation times) and the residuals (minimax-like target errors, hinge residual
 the qualitative checks, a weak prior).
 """
 
+import math
 from typing import NamedTuple
 
 import equinox as eqx
@@ -34,7 +35,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from .._cable import Cable
+from .._cable import DEFAULT_DIAMETER_MM, M_PER_MM
 from .._fit import with_jacobian_jvp
 from .._models import IntegratedModel
 from .park import (
@@ -126,7 +127,9 @@ _INV_RATE2_SLOW = (0.1 / SLOW_SPEED) ** 2  # s^2
 # tests reach in the model (about 7 %: 300 mm, 150 N, 3 mm/min).
 _SET_FORCE = 100.0  # N
 _SET_STRAIN = 0.1
-_AREA = float(Cable(length=0.3).area)  # m^2, the 3 mm cable
+# m^2, the 3 mm cable: `Cable().area` in Python floats, so that importing this
+# module computes nothing (`jaxcable.enable_cpu_loop_kernels`).
+_AREA = (math.pi / 4) * (DEFAULT_DIAMETER_MM * M_PER_MM) ** 2
 
 
 def _e1r_min(E1c, beta, gamma):
