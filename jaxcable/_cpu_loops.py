@@ -27,9 +27,10 @@ _EXTRA = "--xla_backend_extra_options="
 # 16 MiB: the scan of one cable (its stacked outputs are the loop's largest
 # buffers: 2000 samples take about 0.1 MB), and the Newton loops of a batch of
 # 1024 cables, which need between 2 and 4 MB (measured: at 2 MB a 1024-cable
-# forward kept its 85-108 ms, at 4 MB 65 ms, at 16 MB 58-67 ms). The scan of such a
-# batch (its outputs are 10^2 MB) stays a loop of kernels, which XLA can spread
-# over the cores.
+# forward kept its 85-108 ms, at 4 MB 65 ms, at 16 MB 58-67 ms). At 16 MB the whole
+# scan of those 1024 cables (benchmarks/kernel.py's forward, and its gradient's two
+# scans) is one single-threaded kernel as well, which was faster than XLA's spreading
+# of each small kernel over the cores, on 2 and on 16 cores (benchmarks/README.md).
 DEFAULT_LOOP_KERNEL_BYTES = 1 << 24
 # The command line's switch to leave XLA's default.
 NO_LOOP_KERNELS_ENV = "JAXCABLE_NO_LOOP_KERNELS"
@@ -49,16 +50,16 @@ def _backend_started() -> bool:
 def with_loop_kernel_option(flags: str, byte_threshold: int) -> str:
     """`flags` (an `XLA_FLAGS` value) with the loop threshold added, merged into an
     `--xla_backend_extra_options` already there; a threshold already set is kept."""
+    entry = f"{_OPTION}={byte_threshold}"
     words = flags.split()
     for i, word in enumerate(words):
         if word.startswith(_EXTRA):
             options = word[len(_EXTRA) :]
             if _OPTION in options:
                 return flags
-            joined = f"{options},{_OPTION}={byte_threshold}" if options else None
-            words[i] = _EXTRA + (joined or f"{_OPTION}={byte_threshold}")
+            words[i] = _EXTRA + (f"{options},{entry}" if options else entry)
             return " ".join(words)
-    return " ".join(words + [f"{_EXTRA}{_OPTION}={byte_threshold}"])
+    return " ".join(words + [_EXTRA + entry])
 
 
 def enable_cpu_loop_kernels(byte_threshold: int = DEFAULT_LOOP_KERNEL_BYTES) -> str:
