@@ -88,13 +88,10 @@ def enable_cpu_loop_kernels(byte_threshold: int = DEFAULT_LOOP_KERNEL_BYTES) -> 
     `RuntimeError` when JAX's backend has already started (the flag would do
     nothing), and `ValueError` for a threshold that is not a positive integer.
     """
-    if isinstance(byte_threshold, bool) or not isinstance(byte_threshold, int):
+    is_int = isinstance(byte_threshold, int) and not isinstance(byte_threshold, bool)
+    if not is_int or byte_threshold <= 0:
         raise ValueError(
             f"`byte_threshold` must be a positive integer (bytes), got {byte_threshold!r}."
-        )
-    if byte_threshold <= 0:
-        raise ValueError(
-            f"`byte_threshold` must be a positive integer (bytes), got {byte_threshold}."
         )
     if _backend_started():
         raise RuntimeError(
@@ -112,9 +109,10 @@ def loop_kernels_disabled() -> bool:
 
 
 def try_enable_cpu_loop_kernels() -> bool:
-    """[`enable_cpu_loop_kernels`][] with its default, where it can still take effect
-    (the command line's start); whether it did."""
-    if _backend_started():
+    """[`enable_cpu_loop_kernels`][] with its default, unless `$JAXCABLE_NO_LOOP_KERNELS`
+    says no or it can no longer take effect (the command line's start); whether it
+    did."""
+    if loop_kernels_disabled() or _backend_started():
         return False
     enable_cpu_loop_kernels()
     return True

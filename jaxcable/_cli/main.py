@@ -12,7 +12,7 @@ from collections.abc import Sequence
 import jax
 
 from .._cache import enable_compilation_cache
-from .._cpu_loops import loop_kernels_disabled, try_enable_cpu_loop_kernels
+from .._cpu_loops import try_enable_cpu_loop_kernels
 from .common import PROG, CliError, one_line
 from .parser import build_parser
 
@@ -70,8 +70,7 @@ def entry() -> None:
     CPU kernels ([`jaxcable.enable_cpu_loop_kernels`][]; `$JAXCABLE_NO_LOOP_KERNELS`
     leaves XLA's default).
     """
-    if not loop_kernels_disabled():
-        try_enable_cpu_loop_kernels()
+    try_enable_cpu_loop_kernels()
     gc.freeze()
     raise SystemExit(main())
 
