@@ -11,8 +11,10 @@ prints one JSON object and a table: NumPy time, the kernel's time on the same pr
 relative difference.
 
 It is the same model as `jaxcable.IntegratedModel.advance` (Park Eq. 1-9 with the
-readings of docs/model_notes.md) and the same time solve as `jaxcable.simulate_rate_test`
-(Park Eq. 5 = Eq. 6 per force sample, relative strain residual, Newton with an
+readings of docs/model_notes.md: the instantaneous strain with hardening and the
+unloading line from the largest force, three delayed-elastic elements - permanent,
+short- and long-term recoverable - and an Eyring flow) and the same time solve as
+`jaxcable.simulate_rate_test` (Park Eq. 5 = Eq. 6 per force sample, relative strain residual, Newton with an
 analytic derivative): a Python loop over the samples, vectorised over the batch of
 cables, Newton iterations in NumPy until every cable of the batch has converged.
 """
@@ -41,69 +43,92 @@ PARAMETERS = (
     "E3r",
     "lambda1",
     "lambda2",
+    "t_e",
+    "sigma_a",
+)
+# As jaxcable._models.park: the parameters that must be finite and > 0.
+_POSITIVE = (
+    "E1c",
+    "E1r",
+    "E2c",
+    "t_c",
+    "eta0",
+    "E2r",
+    "t_r1",
+    "E3r",
+    "lambda1",
+    "t_e",
+    "sigma_a",
 )
 # As jaxcable._drive.simulate: residual = strain error / (|strain at the start of the step|
 # + |crosshead strain at the guessed end| + floor).
 _STRAIN_FLOOR = 1e-4
 
 
-# As jaxcable._models.kernels: time counts as under tension in proportion to the force below
-# F_on = max(this share of the breaking load, this fraction of the largest force).
-_TENSION_SHARE = 1e-4
-_TENSION_FRACTION = 0.1
-# As jaxcable._models.kernels.relaxation_terms in float64: its Taylor series below this x.
+# As jaxcable._models.kernels.relaxation_terms in float64: its Taylor series below this
+# x, sum_{k=1}^{9} (-1)^(k+1) x^k / (k+1)!.
 _SERIES_BELOW = 0.1
+_RAMP_SERIES = tuple((-1.0) ** (k + 1) / math.factorial(k + 1) for k in range(1, 10))
+# As jaxcable._models.park: the Eyring flow's sinh argument is capped here.
+_EYRING_CAP = 60.0
 
 
-def _tension_share(f0, f1, f_on):
-    """Mean of min(F / F_on, 1) (0 below 0 N) over a step with the force linear from
-    f0 to f1 (as jaxcable._models.kernels.tension_time_step: the chord of its primitive,
-    the value at the mean force below a change of 1e-6 F_on)."""
-
-    def primitive(f):
-        f = np.maximum(f, 0.0)
-        return np.where(f < f_on, 0.5 * f * f / f_on, f - 0.5 * f_on)
-
-    change = f1 - f0
-    small = np.abs(change) < 1e-6 * f_on
-    chord = (primitive(f1) - primitive(f0)) / np.where(small, 1.0, change)
-    mid = np.clip(0.5 * (f0 + f1) / f_on, 0.0, 1.0)
-    return np.where(small, mid, chord)
-
-
-def _ramp_factor(x):
-    """(1 - (1 - e^-x) / x, its x-derivative): the share of a linear ramp that a
-    Kelvin-Voigt element has not yet followed after x = dt / tau (Taylor series near
-    x = 0, as the kernel)."""
+def _relaxation_terms(x):
+    """As jaxcable._models.kernels.relaxation_terms: (expm1(-x), R(x)) for
+    x = dt / tau, R(x) = 1 - (1 - e^-x) / x the share of a linear ramp that a
+    Kelvin-Voigt element has not yet followed (Taylor series near x = 0); and
+    their x-derivatives."""
     small = np.abs(x) < _SERIES_BELOW
     xs = np.where(small, 1.0, x)
-    direct = (xs + np.expm1(-xs)) / xs
-    d_direct = (-np.expm1(-xs) - xs * np.exp(-xs)) / xs**2
-    # sum_{k>=1} (-1)^(k+1) x^k / (k+1)!, and its derivative.
-    series = sum((-1.0) ** (k + 1) * x**k / math.factorial(k + 1) for k in range(1, 10))
-    d_series = sum(
-        (-1.0) ** (k + 1) * k * x ** (k - 1) / math.factorial(k + 1)
-        for k in range(1, 10)
-    )
-    return np.where(small, series, direct), np.where(small, d_series, d_direct)
+    decay_m1 = np.exp(-xs) - 1.0
+    series = np.zeros_like(x)
+    d_series = np.zeros_like(x)
+    for k in range(len(_RAMP_SERIES), 0, -1):  # Horner, highest power first
+        series = (series + _RAMP_SERIES[k - 1]) * x
+        d_series = d_series * x + k * _RAMP_SERIES[k - 1]
+    decay_m1 = np.where(small, x * (series - 1.0), decay_m1)
+    ramp = np.where(small, series, (xs + decay_m1) / xs)
+    d_decay = -(1.0 + decay_m1)  # d/dx expm1(-x) = -e^-x
+    d_ramp = np.where(small, d_series, (-decay_m1 + xs * d_decay) / xs**2)
+    return decay_m1, ramp, d_decay, d_ramp
 
 
 def _retarded(q0, target0, target1, dt, tau):
     """As jaxcable._models.kernels.retarded: q' = (target - q) / tau over dt with the
-    target linear from target0 to target1, exactly; and its dt-derivative for a
-    fixed target1 (the caller adds d target1 / d dt times the ramp factor)."""
-    x = dt / tau
-    decay = np.exp(-x)
-    ramp, d_ramp = _ramp_factor(x)
-    q1 = decay * q0 - np.expm1(-x) * target0 + (target1 - target0) * ramp
-    dq1 = (-decay * q0 + decay * target0 + (target1 - target0) * d_ramp) / tau
+    target linear from target0 to target1, exactly; and its dt-derivative."""
+    decay_m1, ramp, d_decay, d_ramp = _relaxation_terms(dt / tau)
+    q1 = q0 + decay_m1 * (q0 - target0) + (target1 - target0) * ramp
+    dq1 = (d_decay * (q0 - target0) + (target1 - target0) * d_ramp) / tau
     return q1, dq1
 
 
-def _static_loading(p, area, strain_prev, force):
-    # Park Eq. 1-2: (F / (E1c A))**h, h = 1 + beta * eps_{i-1}**gamma.
-    h = 1.0 + p["beta"] * np.maximum(strain_prev, 0.0) ** p["gamma"]
-    return (force / (p["E1c"] * area)) ** h
+def _delayed_elastic(previous, target0, target1, dt, creep_time, recovery_time):
+    """As jaxcable._models.park.delayed_elastic: an element that creeps towards its
+    target with `creep_time` and recovers from above it with `recovery_time` (None:
+    never recovers); and its dt-derivative."""
+    creep, d_creep = _retarded(previous, target0, target1, dt, creep_time)
+    if recovery_time is None:
+        return np.maximum(creep, previous), np.where(creep > previous, d_creep, 0.0)
+    recover, d_recover = _retarded(previous, target0, target1, dt, recovery_time)
+    # Creep faster than recovery: the larger of the two updates, else the smaller.
+    faster_creep = creep_time <= recovery_time
+    q = np.where(faster_creep, np.maximum(creep, recover), np.minimum(creep, recover))
+    takes_creep = np.where(faster_creep, creep >= recover, creep <= recover)
+    return q, np.where(takes_creep, d_creep, d_recover)
+
+
+def _safe_pow(base, exponent):
+    """As jaxcable._models.kernels.safe_pow: base**exponent for base >= 0."""
+    positive = base > 0
+    safe = np.where(positive, base, 1.0)
+    return np.where(positive, np.exp(exponent * np.log(safe)), 0.0)
+
+
+def _eyring_rate(stress, viscosity, activation_stress):
+    """As jaxcable._models.park.eyring_rate: (sigma_a / eta0) sinh(sigma / sigma_a),
+    1/s."""
+    x = np.minimum(stress / activation_stress, _EYRING_CAP)
+    return activation_stress / viscosity * np.sinh(x)
 
 
 def simulate_rate_test_numpy(
@@ -121,7 +146,7 @@ def simulate_rate_test_numpy(
 
     **Arguments:**
 
-    - `params_dict`: the 12 parameters of `jaxcable.IntegratedModel` by name, SI
+    - `params_dict`: the 14 parameters of `jaxcable.IntegratedModel` by name, SI
         (scalars, or arrays of shape (batch,)).
     - `lengths`: free lengths L0, m, shape (batch,).
     - `speeds`: crosshead speeds v, m/s, shape (batch,) or scalar.
@@ -129,8 +154,8 @@ def simulate_rate_test_numpy(
         (s, holds) and optionally `mask`, each of shape (samples,) - the fields of a
         `jaxcable.Protocol` - or the tuple (force, direction, duration[, mask]).
     - `diameter`: cable diameter, m.
-    - `breaking_load`: the cable's breaking load, N (sets the force below which a
-        step counts only in part as time under tension, as `jaxcable.Cable`).
+    - `breaking_load`: the cable's breaking load, N (the parameters are in their
+        domain only where E1c A exceeds it, as `jaxcable.IntegratedModel.check`).
     - `tol`, `max_steps`: Newton tolerance on the relative strain residual, and the
         most Newton steps per sample.
 
@@ -164,15 +189,26 @@ def simulate_rate_test_numpy(
     area = np.pi / 4 * diameter**2
     rate = speeds / lengths  # strain rate, 1/s
     t_r2 = p["lambda1"] / rate**2 - p["lambda2"]  # Park Eq. 8
-    ok = (t_r2 > 0) & (p["E1c"] * area > 0)
+    # The parameters' domain (as jaxcable.IntegratedModel.check).
+    ok = np.isfinite(t_r2) & (t_r2 > 0)
+    for k in _POSITIVE:
+        ok &= np.isfinite(p[k]) & (p[k] > 0)
+    ok &= (p["beta"] >= 0) & (p["gamma"] >= 0)
+    ok &= p["E1c"] * area > breaking_load
+
+    # Compliances 1 / (E A) of the instantaneous strain and of the three elements.
+    compliance_c = 1.0 / (p["E1c"] * area)
+    compliance_r = 1.0 / (p["E1r"] * area)
+    ca_permanent = 1.0 / (p["E2c"] * area)
+    ca_short = 1.0 / (p["E2r"] * area)
+    ca_long = 1.0 / (p["E3r"] * area)
 
     zeros = lambda: np.zeros(batch)
     # Model state (jaxcable.IntegratedState) and driver state (CableState).
-    force_prev, strain_prev, impulse, t_total = zeros(), zeros(), zeros(), zeros()
-    force_max = zeros()
-    short, long, short_target, long_target = zeros(), zeros(), zeros(), zeros()
+    force_prev, strain_prev, force_max = zeros(), zeros(), zeros()
+    permanent, short, long, flow = zeros(), zeros(), zeros(), zeros()
+    short_max, long_max = zeros(), zeros()
     t_now, last_step = zeros(), zeros()
-    f_on = _TENSION_SHARE * breaking_load
 
     out_time = np.empty((batch, n))
     out_strain = np.empty((batch, n))
@@ -184,51 +220,41 @@ def simulate_rate_test_numpy(
         m = mask_seq[i]
 
         # The parts that do not depend on the step length: the running maximum, the
-        # instantaneous strain (Park Eq. 1-2 and Eq. 9's unloading line from the
-        # largest force, never below the loading curve), the recovery depth.
+        # instantaneous strain (Park Eq. 1-2 with h from the previous strain, and
+        # Eq. 9's unloading line from the largest force, never below the loading
+        # curve), the elements' targets F / (E_k A) and the flow rate at both ends.
         f_max = np.maximum(force_max, F)
-        drop = f_max - F
-        inst = np.maximum(
-            _static_loading(p, area, strain_prev, f_max) - drop / (p["E1r"] * area),
-            _static_loading(p, area, strain_prev, F),
-        )
-        depth = drop / np.maximum(f_max, f_on)
-        long_tgt = drop / (p["E3r"] * area)
-        d_impulse = 0.5 * (force_prev + F)
-        # Time under tension per second of the step: the mean over the step of
-        # min(F / F_on, 1) for the force linear over the step, F_on at the step's
-        # largest force so far (as jaxcable._models.kernels).
-        d_ttotal = _tension_share(
-            force_prev, F, np.maximum(f_on, _TENSION_FRACTION * f_max)
-        )
+        h = 1.0 + p["beta"] * _safe_pow(np.maximum(strain_prev, 0.0), p["gamma"])
+        static = _safe_pow(F * compliance_c, h)
+        static_max = _safe_pow(f_max * compliance_c, h)
+        inst = np.maximum(static_max - (f_max - F) * compliance_r, static)
+        rate0 = _eyring_rate(force_prev / area, p["eta0"], p["sigma_a"])
+        rate1 = _eyring_rate(F / area, p["eta0"], p["sigma_a"])
+        flow_rate = 0.5 * (rate0 + rate1)
 
         def strain_and_slope(dt):
             """Total strain after a step dt and its derivative d strain / d dt."""
-            imp = impulse + d_impulse * dt
-            T = t_total + d_ttotal * dt
-            pos = T > 0
-            Ts = np.where(pos, T, 1.0)
-            e_c = np.exp(-Ts / p["t_c"])
-            ra = np.where(pos, -np.expm1(-Ts / p["t_c"]) / Ts, 1.0 / p["t_c"])
-            dra = np.where(pos, (e_c / p["t_c"] - ra) / Ts, 0.0)
-            creep = imp * ra / (p["E2c"] * area) + imp / (p["eta0"] * area)
-            dcreep = (d_impulse * ra + imp * dra * d_ttotal) / (
-                p["E2c"] * area
-            ) + d_impulse / (p["eta0"] * area)
-            feq = imp / Ts
-            dfeq = np.where(pos, (d_impulse * Ts - imp * d_ttotal) / Ts**2, d_impulse)
-            # Each recovery relaxes towards its amplitude, linear over the step.
-            short_tgt = feq * depth / (p["E2r"] * area)
-            dshort_tgt = dfeq * depth / (p["E2r"] * area)
-            s, ds = _retarded(short, short_target, short_tgt, dt, p["t_r1"])
-            s_slope = ds + dshort_tgt * _ramp_factor(dt / p["t_r1"])[0]
-            lg, dlg = _retarded(long, long_target, long_tgt, dt, t_r2)
-            # The recoveries remove at most the creep that produced them.
-            recovery = s + lg
-            excess = recovery > creep
-            total = inst + creep - np.where(excess, creep, recovery)
-            slope = np.where(excess, 0.0, dcreep - s_slope - dlg)
-            return total, slope, (s, lg, short_tgt)
+            q_p, dq_p = _delayed_elastic(
+                permanent,
+                force_prev * ca_permanent,
+                F * ca_permanent,
+                dt,
+                p["t_c"],
+                None,
+            )
+            q_s, dq_s = _delayed_elastic(
+                short, force_prev * ca_short, F * ca_short, dt, p["t_e"], p["t_r1"]
+            )
+            q_l, dq_l = _delayed_elastic(
+                long, force_prev * ca_long, F * ca_long, dt, p["t_e"], t_r2
+            )
+            eps_p = flow + flow_rate * dt
+            s_max = np.maximum(short_max, q_s)
+            l_max = np.maximum(long_max, q_l)
+            creep = q_p + s_max + l_max + eps_p
+            total = inst + creep - (s_max - q_s) - (l_max - q_l)
+            slope = dq_p + dq_s + dq_l + flow_rate
+            return total, slope, (q_p, q_s, q_l, eps_p, s_max, l_max)
 
         # Initial guess as the kernel: the previous step inside a ramp, else the time
         # of the instantaneous strain step at speed v (a ramp's first sample) or the
@@ -266,12 +292,10 @@ def simulate_rate_test_numpy(
             dt = np.where(converged, dt, np.maximum(step, 0.0))
         ok &= converged & np.isfinite(dt) & (dt >= 0)
 
-        total, _, (s_new, l_new, s_tgt) = strain_and_slope(dt)
+        total, _, new_state = strain_and_slope(dt)
         if m:
-            impulse = impulse + d_impulse * dt
-            t_total = t_total + d_ttotal * dt
             force_max = f_max
-            short, long, short_target, long_target = s_new, l_new, s_tgt, long_tgt
+            permanent, short, long, flow, short_max, long_max = new_state
             force_prev = np.full(batch, F)
             strain_prev = total
             t_now = t_now + dt

@@ -1,6 +1,9 @@
 import importlib.metadata
 
-from ._cable import Cable as Cable
+from ._cable import (
+    DEFAULT_BREAKING_STRAIN as DEFAULT_BREAKING_STRAIN,
+    Cable as Cable,
+)
 from ._cache import (
     clear_compilation_cache as clear_compilation_cache,
     enable_compilation_cache as enable_compilation_cache,

@@ -17,12 +17,15 @@ CABLE_FIELDS = (
     "diameter",
     "speed",
     "breaking_load",
+    "breaking_strain",
     "temperature",
     "covariate",
 )
 
 # The fields that must be positive (a covariate may take any sign).
 _POSITIVE_FIELDS = CABLE_FIELDS[:-1]
+# The positive fields that may be +inf (a material that never breaks).
+_MAY_BE_INFINITE = ("breaking_strain",)
 
 # Kelvin at 0 °C: data files record temperature in °C, Cable holds kelvin.
 ZERO_CELSIUS = 273.15
@@ -35,6 +38,13 @@ M_PER_MM = 1e-3
 # cable whose file leaves them out.
 DEFAULT_DIAMETER_MM = 3.0
 DEFAULT_RATE_MM_PER_MIN = 3.0
+
+# The breaking strain (elongation / L0 at break) of a cable that does not give its own:
+# a placeholder for the 3 mm braided Dyneema SK78 rope of Park et al., to be replaced
+# by a measured value with its source. A braided rope breaks at a larger strain than
+# its fibre (UHMWPE fibre: about 0.035), since the braid's construction stretch adds
+# to the fibre's.
+DEFAULT_BREAKING_STRAIN = 0.05
 
 
 def speed_from_mm_per_min(rate_mm_per_min):
@@ -59,6 +69,13 @@ class Cable(eqx.Module):
         rate-driven test (Park Eq. 6) and the long-term retardation time (Park Eq. 8).
     - `breaking_load`: force above which inputs are rejected, N (default 2000 N, the
         rated load of the 3 mm SK78 cable in Park Section 2.1).
+    - `breaking_strain`: strain (elongation / L0) at which the cable breaks,
+        dimensionless (default `jaxcable.DEFAULT_BREAKING_STRAIN`, for the 3 mm
+        braided Dyneema SK78 rope). Every simulation reports a strain above it as
+        [`jaxcable.RESULTS`][]`.strain_beyond_break` (raised with `throw=True`):
+        the model has been run past the point where the cable is in one piece.
+        `math.inf` for a material with no meaningful break (e.g. an elastomer with
+        the linear baselines): never flagged.
     - `temperature`: temperature of the cable, K (default 293.15 K = 20 °C). Only
         temperature-dependent models read it (e.g. [`jaxcable.TemperatureShift`][]);
         the fit and the drivers set it per sample from a test's temperature record.
@@ -79,6 +96,9 @@ class Cable(eqx.Module):
     breaking_load: Float[Array, "*batch"] = eqx.field(
         converter=field_array, default=2000.0
     )
+    breaking_strain: Float[Array, "*batch"] = eqx.field(
+        converter=field_array, default=DEFAULT_BREAKING_STRAIN
+    )
     temperature: Float[Array, "*batch"] = eqx.field(
         converter=field_array, default=293.15
     )
@@ -94,7 +114,9 @@ class Cable(eqx.Module):
             if not _checks.is_concrete(value):
                 continue
             try:
-                _checks.require_positive(name, value)
+                _checks.require_positive(
+                    name, value, allow_inf=name in _MAY_BE_INFINITE
+                )
             except ValueError as e:
                 raise ValueError(f"Cable {str(e).rstrip('.')}, SI units.") from None
 
@@ -107,6 +129,7 @@ class Cable(eqx.Module):
         rate_mm_per_min: Float[ArrayLike, "*batch"] = DEFAULT_RATE_MM_PER_MIN,
         temperature_C: Float[ArrayLike, "*batch"] | None = None,
         breaking_load_N: Float[ArrayLike, "*batch"] | None = None,
+        breaking_strain: Float[ArrayLike, "*batch"] | None = None,
     ) -> "Cable":
         """The cable described in the units of data files and their metadata.
 
@@ -120,17 +143,21 @@ class Cable(eqx.Module):
         - `rate_mm_per_min`: crosshead speed, mm/min (default 3 mm/min).
         - `temperature_C`: temperature, °C, or `None` for the `Cable` default (20 °C).
         - `breaking_load_N`: breaking load, N, or `None` for the `Cable` default.
+        - `breaking_strain`: breaking strain (elongation / L0, dimensionless), or
+            `None` for the `Cable` default.
 
         **Returns:**
 
         A `Cable` in SI: `length` and `diameter` in m, `speed` in m/s, `temperature`
-        in K.
+        in K (`breaking_strain` is dimensionless, as given).
         """
         kwargs = {}
         if temperature_C is not None:
             kwargs["temperature"] = temperature_C + ZERO_CELSIUS
         if breaking_load_N is not None:
             kwargs["breaking_load"] = breaking_load_N
+        if breaking_strain is not None:
+            kwargs["breaking_strain"] = breaking_strain
         return cls(
             length=length_mm * M_PER_MM,
             diameter=diameter_mm * M_PER_MM,

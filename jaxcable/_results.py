@@ -8,6 +8,12 @@ class RESULTS(eqx.Enumeration):
     result is not `RESULTS.successful`; with `throw=False` the result is returned in
     [`jaxcable.Trajectory`][]`.result`, one per cable when vmapped, so that a
     Monte-Carlo batch keeps the cables that succeeded.
+
+    Each sample is checked in order: its own cause first (a solve that failed, a time
+    or force that is not physical, a strain that is not finite or, for a solved
+    sample, above the model's limit), then `strain_beyond_break`, a strain above the
+    cable's breaking strain ([`jaxcable.Cable`][]`.breaking_strain`); the first
+    failing sample's result is the simulation's.
     """
 
     successful = ""
@@ -48,4 +54,11 @@ class RESULTS(eqx.Enumeration):
         "t_r2 = lambda1 / strain_rate**2 - lambda2 (Park Eq. 8) is not positive for "
         "this cable's strain rate, or a modulus, viscosity or time constant is not "
         "positive."
+    )
+    strain_beyond_break = (
+        "The strain exceeded the cable's breaking strain (`Cable.breaking_strain`): "
+        "the cable would have broken, and the model's elongations beyond it describe "
+        "no real cable. Lower the force or the time under load, or give the cable "
+        "its measured breaking strain (`math.inf` for a material that does not "
+        "break, such as an elastomer)."
     )

@@ -9,6 +9,7 @@ and masks the slack stretch at the end of the unloading.
 """
 
 import dataclasses
+import math
 import os
 import pathlib
 
@@ -23,6 +24,9 @@ SHARED = pathlib.Path(
 FOLDER = SHARED / "data" / "vhb4910" / "loading-unloading"
 GAUGE_MM = 80.0
 BREAKING_LOAD = 1.5  # N: just above the largest force of the data set (1.43 N)
+# An elastomer stretched to 6 times its length in these tests, which are not about its
+# break: no strain is flagged as one (`breaking_strain` metadata).
+BREAKING_STRAIN = math.inf
 RATES = {"0d01": 0.01, "0d03": 0.03, "0d05": 0.05}  # stretch rate, 1/s
 EXCLUDED = {"0d05_2d5_2.csv": "named stretch 2.5 but peaks at 80 mm (stretch 2.0)"}
 
@@ -48,7 +52,8 @@ def thin(data: jc.TestData, samples: int) -> jc.TestData:
 
 def read(path: pathlib.Path, samples: int = 200) -> jc.TestData:
     """One test, thinned to about `samples` samples, with a breaking load that suits
-    a 1 N specimen (`breaking_load_N` metadata, read by `TestData.cable()`)."""
+    a 1 N specimen and no breaking strain (`breaking_load_N` and `breaking_strain`
+    metadata, read by `TestData.cable()`)."""
     rate = RATES[path.name[:4]]
     data = jc.read_test(
         path,
@@ -58,6 +63,7 @@ def read(path: pathlib.Path, samples: int = 200) -> jc.TestData:
         id=path.stem,
     )
     data.metadata["breaking_load_N"] = BREAKING_LOAD
+    data.metadata["breaking_strain"] = BREAKING_STRAIN
     return thin(data, samples)
 
 
@@ -75,7 +81,7 @@ def read_relaxation(path: pathlib.Path, ramp: int = 40, hold: int = 80) -> jc.Te
     """One relaxation test (a ramp at 20 mm/s to a stretch of 1.5-6, held 1800 s),
     thinned to `ramp` samples evenly over the ramp and `hold` samples log-spaced over
     the hold (the force relaxes on every time scale from 0.05 s to 30 min), with the
-    breaking load `RELAXATION_BREAKING_LOAD`. The files are read as they come; their
+    breaking load `RELAXATION_BREAKING_LOAD` and no breaking strain. The files are read as they come; their
     control (displacement) is detected from the data by `jaxcable.fit`."""
     data = jc.read_test(
         path,
@@ -99,6 +105,7 @@ def read_relaxation(path: pathlib.Path, ramp: int = 40, hold: int = 80) -> jc.Te
         force_raw=None,
     )
     data.metadata["breaking_load_N"] = RELAXATION_BREAKING_LOAD
+    data.metadata["breaking_strain"] = BREAKING_STRAIN
     return data
 
 

@@ -1,5 +1,7 @@
 """Failure is never silent: Python-boundary ValueErrors and traced RESULTS."""
 
+import math
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -10,6 +12,9 @@ import jaxcable as jc
 
 
 CABLE = jc.Cable(length=0.3, speed=3e-3 / 60)
+# The same cable without a breaking strain, for the verdicts that a break (a strain
+# beyond `Cable.breaking_strain`, met earlier in these histories) would precede.
+UNBREAKABLE = jc.Cable(length=0.3, speed=3e-3 / 60, breaking_strain=math.inf)
 MODEL = jc.IntegratedModel()
 T = np.linspace(0.0, 100.0, 11)
 F = np.linspace(0.0, 100.0, 11)
@@ -129,13 +134,13 @@ def test_force_out_of_reach_is_physics_not_a_solver_failure(ratio):
     # Coarse samples (every 60 N), so that none lies just below the force
     # peak / ratio where the crosshead takes hours to catch up.
     protocol = jc.Protocol.cycles(peak, 1, 5)
-    traj = jc.simulate_rate_test(model, CABLE, protocol, throw=False)
+    traj = jc.simulate_rate_test(model, UNBREAKABLE, protocol, throw=False)
     if ratio < 1:
         assert traj.result == jc.RESULTS.successful
         return
     assert traj.result == jc.RESULTS.unreachable_force
     with pytest.raises(Exception, match="cannot be reached at this crosshead speed"):
-        jc.simulate_rate_test(model, CABLE, protocol)
+        jc.simulate_rate_test(model, UNBREAKABLE, protocol)
 
 
 def test_solve_beyond_twice_the_length_is_flagged():
@@ -150,13 +155,17 @@ def test_solve_beyond_twice_the_length_is_flagged():
     protocol = jc.Protocol.concatenate(
         jc.Protocol.cycles(1500.0, 1, 10), jc.Protocol.hold(1500.0, 3600.0, 6)
     )
-    fast = jc.Cable(length=0.3, speed=50e-3 / 60)
+    fast = jc.Cable(length=0.3, speed=50e-3 / 60, breaking_strain=math.inf)
     traj = jc.simulate_rate_test(MODEL, fast, protocol, throw=False)
     assert traj.result == jc.RESULTS.nonphysical_strain
     assert np.max(traj.strain) > 1.0
     with pytest.raises(Exception, match="above 1"):
         jc.simulate_rate_test(MODEL, fast, protocol)
-    slow = jc.simulate_rate_test(MODEL, CABLE, protocol, throw=False)
+    # With a breaking strain, its crossing (on the first ramp) comes first.
+    brittle = jc.Cable(length=0.3, speed=50e-3 / 60, breaking_strain=0.05)
+    broken = jc.simulate_rate_test(MODEL, brittle, protocol, throw=False)
+    assert broken.result == jc.RESULTS.strain_beyond_break
+    slow = jc.simulate_rate_test(MODEL, UNBREAKABLE, protocol, throw=False)
     assert slow.result == jc.RESULTS.unreachable_force
     # Up to 450 N (the last sample reached) the strain stays below 0.3.
     assert 0.0 < float(slow.strain[3]) < 0.3

@@ -130,6 +130,9 @@ def test_instant_unload_matches_piao_eq3():
 
 
 def test_branch_families_use_their_own_parameters():
+    """Distinct sets: the loading family keeps its L kernel, the removed stress is
+    superposed with the UL kernel, and the strain is bounded below by 0
+    (max(Eq. 2-3 + D(t), 0), docs/model_notes.md point 10)."""
     model = asymmetric_five_element()
     p = floats(model)
     f0, t_r = 500.0, 5.0
@@ -138,23 +141,41 @@ def test_branch_families_use_their_own_parameters():
     force = np.where(time <= t_r, f0, 0.0)
     traj = jaxcable.simulate_force_history(model, CABLE, time, force)
     after = time - t_r - 1e-9
-    # The loading family keeps relaxing towards sigma0 with the L kernel; the removed
-    # stress is superposed with the UL kernel (an unloading step of 1 ns is a step).
+    # An unloading step of 1 ns is a step.
     loading = sigma0 * _compliance(model, time)
-    unloading = sigma0 * (
-        1 / p.E_UL1
-        + -np.expm1(-p.E_UL2 * after / p.eta_UL2) / p.E_UL2
-        + -np.expm1(-p.E_UL3 * after / p.eta_UL3) / p.E_UL3
+    unloading = np.where(
+        time > t_r,
+        sigma0
+        * (
+            1 / p.E_UL1
+            + -np.expm1(-p.E_UL2 * after / p.eta_UL2) / p.E_UL2
+            + -np.expm1(-p.E_UL3 * after / p.eta_UL3) / p.E_UL3
+        ),
+        0.0,
     )
-    expected = loading - np.where(time > t_r, unloading, 0.0)
-    np.testing.assert_allclose(traj.strain, expected, rtol=1e-7, atol=1e-15)
+    # This UL set is softer than the L set: unbounded, the cable would end 1.6e-3
+    # shorter than new; the bound stops it at 0.
+    assert np.min(loading - unloading) < -1.5e-3
     np.testing.assert_allclose(
-        traj.instantaneous[-1], sigma0 * (1 / 2.0e10 - 1 / 1.5e10), rtol=1e-12
+        traj.strain, np.maximum(loading - unloading, 0.0), rtol=1e-7, atol=1e-15
     )
+    bounded = unloading > loading
+    assert bounded.sum() == 4 and not bounded[:6].any()
+    # Each unloading term is scaled by the same share s = min(1, added / removed).
+    share = np.where(bounded, loading / np.where(bounded, unloading, 1.0), 1.0)
     np.testing.assert_allclose(
-        traj.recovery_short[-1],
-        sigma0 / p.E_UL2 * -np.expm1(-p.E_UL2 * after[-1] / p.eta_UL2),
+        traj.instantaneous,
+        sigma0 * (1 / p.E_L1 - share * (time > t_r) / p.E_UL1),
         rtol=1e-7,
+    )
+    np.testing.assert_allclose(
+        traj.recovery_short,
+        share
+        * sigma0
+        / p.E_UL2
+        * -np.expm1(-p.E_UL2 * np.maximum(after, 0) / p.eta_UL2),
+        rtol=1e-7,
+        atol=1e-12,  # the 1 ns unloading ramp is a ramp, not a step
     )
 
 

@@ -18,17 +18,17 @@ from jaxcable._papers import calibration, park
 
 # Errors (%) of the default set, as measured when it was fitted (samples_per_ramp=200).
 MEASURED_ERRORS = {
-    "creep_ratio_300mm": -0.25,
-    "residual_300mm": 1.20,
-    "residual_100mm": 0.78,
-    "recovery_100mm_24h": 3.13,
-    "recovery_100mm_48h": 3.17,
-    "recovery_100mm_72h": 1.86,
-    "recovery_300mm_24h": -2.37,
-    "recovery_300mm_48h": 4.17,
-    "recovery_300mm_72h": -4.49,
-    "peak_300mm_50mm_min": 0.04,
-    "peak_300mm_3mm_min": -2.15,
+    "creep_ratio_300mm": -1.67,
+    "residual_300mm": -3.89,
+    "residual_100mm": 4.06,
+    "second_test_100mm_24h": 1.69,
+    "second_test_100mm_48h": 1.81,
+    "second_test_100mm_72h": 0.52,
+    "second_test_300mm_24h": -2.80,
+    "second_test_300mm_48h": 3.75,
+    "second_test_300mm_72h": -3.80,
+    "peak_300mm_50mm_min": -1.44,
+    "peak_300mm_3mm_min": -3.03,
 }
 # Targets the model cannot reach within 5 % (none reached at present).
 MISSED = set()
@@ -72,27 +72,30 @@ def test_cyclic_behaviour():
 
 
 def test_default_set_is_physical():
-    # The constraints of the fit (jaxcable._papers.calibration): h = 1 + beta eps**gamma is
-    # differentiable at eps = 0; the unloading is stiffer than the hardened loading
-    # secant (instantaneous set >= 0 in every cycle to 100 N or more, strain <= 10 %);
-    # the short-term recovery is slower than Park's slowest crosshead.
+    # The constraints of the fit (jaxcable._papers.calibration): no hardening (not
+    # identified; beta > 0 would break the monotonicity in load); the unloading line
+    # at least as stiff as the loading curve; the short-term element creeps faster
+    # than it recovers; the flow fixed at its literature anchor.
     model = jc.IntegratedModel()
-    assert 1.0 <= float(model.gamma) <= 5.0
-    e1r_min = calibration._e1r_min(model.E1c, model.beta, model.gamma)
-    assert float(model.E1r) > float(e1r_min) > float(model.E1c)
-    assert float(model.E2r) > float(calibration._e2r_min(model.t_r1))
-    # Directly: the instantaneous strain at 0 N after each of 10 cycles is >= 0.
-    n = 50
-    protocol = jc.Protocol.cycles(150.0, cycles=10, samples_per_ramp=n)
-    traj = jc.simulate_rate_test(model, jc.Cable(length=0.3), protocol)
-    valleys = np.asarray(traj.parts.instantaneous)[2 * n :: 2 * n]
-    assert valleys.shape == (10,) and np.all(valleys >= 0), valleys
-    assert float(np.max(traj.strain)) < calibration._SET_STRAIN
+    assert float(model.beta) == 0.0
+    assert float(model.E1r) >= float(model.E1c)
+    assert float(model.t_e) <= float(model.t_r1)
+    for name, value in calibration.SK78_FLOW.items():
+        assert float(getattr(model, name)) == value
+
+
+def test_rest_dependence_of_the_second_test(report):
+    # Park Table 3, 300 mm: the longer the rest, the more the cable stretches back
+    # (5.05 < 5.99 < 7.12 mm); 100 mm: recovered within a day (2.33, 2.33, 2.36).
+    long_ = [report[f"second_test_300mm_{h}h"].model for h in (24, 48, 72)]
+    short = [report[f"second_test_100mm_{h}h"].model for h in (24, 48, 72)]
+    assert long_[0] < long_[1] < long_[2]
+    assert max(short) - min(short) < 0.05 * min(short)
 
 
 def test_rests_end_no_shorter_than_new():
-    # Soft targets of the fit: after 10 cycles to 100 N at 3 mm/min, the 100 and 300
-    # mm cables end the 24, 48 and 72 h rests longer than new.
+    # After 10 cycles to 100 N at 3 mm/min, the 100 and 300 mm cables end the 24,
+    # 48 and 72 h rests longer than new.
     _, ok, rest_ends, _ = park.simulate_targets(
         jc.IntegratedModel(), 100, None, throw=False
     )
@@ -160,19 +163,19 @@ def test_target_gradient_matches_finite_differences():
     # The fit differentiates the targets in forward mode through the kernel.
     n = 10
 
-    def recovery_300mm_72h(log_e3r):
+    def second_test_300mm_72h(log_e3r):
         model = eqx.tree_at(lambda m: m.E3r, jc.IntegratedModel(), jnp.exp(log_e3r))
         values, _ = park.target_values(model, n, None, throw=False)
         return values[8]
 
     # One compiled function gives the derivative and the finite differences.
-    value_and_slope = jax.jit(lambda x: jax.jvp(recovery_300mm_72h, (x,), (1.0,)))
+    value_and_slope = jax.jit(lambda x: jax.jvp(second_test_300mm_72h, (x,), (1.0,)))
     x = jnp.log(jc.IntegratedModel().E3r)
     h = 1e-5
     _, slope = value_and_slope(x)
     fd = (value_and_slope(x + h)[0] - value_and_slope(x - h)[0]) / (2 * h)
     assert float(slope) == pytest.approx(float(fd), rel=1e-5)
-    assert slope < 0  # a stiffer long-term element recovers less
+    assert slope < 0  # a stiffer long-term element recovers, and re-extends, less
 
 
 _CALIBRATE = """

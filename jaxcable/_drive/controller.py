@@ -18,7 +18,7 @@ from jaxtyping import Array, ArrayLike, Float, Int
 
 from .. import _checks
 from .._arrays import field_array
-from .._cable import Cable
+from .._cable import CABLE_FIELDS, Cable
 from .._models import (
     PIAO_TABLE3,
     AbstractCableModel,
@@ -223,7 +223,8 @@ def _num_cables(cables: Cable) -> int:
         )
     shapes = {
         name: jnp.shape(getattr(cables, name))
-        for name in ("length", "diameter", "speed", "breaking_load")
+        for name in CABLE_FIELDS
+        if getattr(cables, name) is not None
     }
     sizes = {s[0] for s in shapes.values() if len(s) == 1}
     if any(len(s) > 1 for s in shapes.values()) or len(sizes) != 1:
@@ -353,8 +354,10 @@ def controller_step(
         and used as measured, with no deadband: the elongations are those of
         [`jaxcable.simulate_force_history`][] on the same history.
     - `per_cable`: whether `model` carries one parameter set per cable (static).
-    - `throw`: raise at runtime when a cable's result is not successful (default).
-        With `throw=False` the failures stay in `state.result`, one per cable.
+    - `throw`: raise at runtime when a cable's result is not successful (default),
+        e.g. `RESULTS.strain_beyond_break` for a cable strained beyond its
+        `breaking_strain`. With `throw=False` the failures stay in `state.result`,
+        one per cable.
 
     **Returns:**
 

@@ -83,7 +83,14 @@ def force_step(
     )
     result = sample_result(dt=dt, force=sample.force)
     return commit(
-        state, model_state, parts, sample.time, sample.force, result, sample.mask
+        state,
+        cable,
+        model_state,
+        parts,
+        sample.time,
+        sample.force,
+        result,
+        sample.mask,
     )
 
 
@@ -240,7 +247,14 @@ class RateDrive(AbstractDrive):
         )
         result = solved_result(result, parts.total, limit)
         return commit(
-            state, model_state, parts, state.time + dt, force, result, sample.mask
+            state,
+            cable,
+            model_state,
+            parts,
+            state.time + dt,
+            force,
+            result,
+            sample.mask,
         )
 
 
@@ -337,5 +351,5 @@ class ElongationDrive(AbstractDrive):
         )
         result = solved_result(result, parts.total, strain_limit(model))
         return commit(
-            state, model_state, parts, sample.time, force, result, sample.mask
+            state, cable, model_state, parts, sample.time, force, result, sample.mask
         )

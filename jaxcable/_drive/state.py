@@ -146,7 +146,9 @@ def strain_limit(model: AbstractCableModel) -> float:
     unbounded in gamma) makes the strain almost independent of the force, so that a
     solved force or time would be one of many. The linear and hysteretic baselines
     (an elastomer stretched to 6 times its length in a relaxation test) have no such
-    limit. A force history, which is not inverted, is simulated at any strain.
+    limit. A force history, which is not inverted, is simulated at any strain. The
+    cable's own breaking strain (`Cable.breaking_strain`) is a separate check, made
+    for every drive (`commit`).
     """
     while isinstance(getattr(model, "base", None), AbstractCableModel):
         model = model.base
@@ -169,8 +171,24 @@ def select(pred, new, old):
     return jtu.tree_map(lambda a, b: jnp.where(pred, a, b), new, old)
 
 
+def broken_result(
+    result: RESULTS, strain: Float[Array, ""], breaking_strain: Float[Array, ""]
+) -> RESULTS:
+    """`result` of a sample, or `strain_beyond_break` where it was successful but its
+    strain is above the cable's `breaking_strain` (`Cable.breaking_strain`)."""
+    # The sample's own cause comes first: a strain that is not finite, or beyond the
+    # model's limit, has a message of its own (and a NaN compares False, so it would
+    # otherwise read as a break).
+    # In the strain's dtype: a float32 simulation of a cable whose other fields are
+    # float64 compares in float32.
+    limit = jnp.asarray(breaking_strain, strain.dtype)
+    ok = (strain <= limit) | (result != RESULTS.successful)
+    return RESULTS.where(ok, result, RESULTS.strain_beyond_break)
+
+
 def commit(
     state: CableState,
+    cable: Cable,
     model_state: PyTree,
     parts: StrainParts,
     time: Float[Array, ""],
@@ -183,6 +201,8 @@ def commit(
     **Arguments:**
 
     - `state`: the [`jaxcable.CableState`][] before the sample.
+    - `cable`: the [`jaxcable.Cable`][], whose `breaking_strain` the strain is
+        checked against.
     - `model_state`, `parts`: the model's state and strain after the sample.
     - `time`, `force`: the sample's time (s) and force (N).
     - `result`: the sample's own result (`sample_result`).
@@ -201,6 +221,9 @@ def commit(
         result,
         RESULTS.nonphysical_strain,
     )
+    # Every drive passes here, so a strain beyond the break is flagged for all of
+    # them; a comparison on the result only, so the trajectory is unchanged.
+    result = broken_result(result, strain, cable.breaking_strain)
     new = CableState(
         model_state=model_state,
         time=time,

@@ -40,8 +40,8 @@ def read_csv(path: str | os.PathLike, **overrides: float | str) -> TestData:
     """Read a test history in the canonical CSV format.
 
     The file starts with `# key: value` lines (`length_mm` required; `diameter_mm`,
-    `rate_mm_per_min`, `temperature_C`, `breaking_load_N`, `material`, `id` and any
-    other keys optional),
+    `rate_mm_per_min`, `temperature_C`, `breaking_load_N`, `breaking_strain`,
+    `material`, `id` and any other keys optional),
     then a header line naming the columns with their units (`time_s` and `force_N`
     required; `elongation_mm` and `temperature_C` optional; also accepted: `time_ms`,
     `time_min`, `time_h`, `force_kN`, `elongation_m`; any other column is kept as an

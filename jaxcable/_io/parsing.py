@@ -44,9 +44,9 @@ def metadata_value(key: str, value, place: str) -> float | str:
         number = float(value)
     except (TypeError, ValueError):
         raise ValueError(f"{place}: {_show(value)} is not a number.") from None
-    if not math.isfinite(number):
-        raise ValueError(f"{place}: {_show(value)} is not a finite number.")
     bound = NUMERIC_METADATA[key]
+    if not (math.isfinite(number) or (bound.infinite and number == math.inf)):
+        raise ValueError(f"{place}: {_show(value)} is not a finite number.")
     if number <= bound.minimum:
         what = "positive" if bound.minimum == 0 else f"above {bound.minimum:g}"
         raise ValueError(f"{place}: must be {what}, got {number:g}.")

@@ -159,9 +159,9 @@ def read_test(
     strictly increasing in the file's unit or in seconds (repeated time stamps
     included: remove them from the file), a header that names no time and force
     column, a numeric metadata value (`length_mm`, `diameter_mm`,
-    `rate_mm_per_min`, `temperature_C`, `breaking_load_N`) that is not a finite
-    number the [`jaxcable.Cable`][] accepts, or no `length_mm`; an instrument
-    metadata line without a known unit, unless its value is given here.
+    `rate_mm_per_min`, `temperature_C`, `breaking_load_N`, `breaking_strain`) that
+    is not a finite number the [`jaxcable.Cable`][] accepts, or no `length_mm`; an
+    instrument metadata line without a known unit, unless its value is given here.
     """
     lines = read_lines(path, encoding)
     metadata, first = parse_metadata(lines, path)

@@ -19,6 +19,7 @@ _CABLE_KEYS = (
     "rate_mm_per_min",
     "temperature_C",
     "breaking_load_N",
+    "breaking_strain",
 )
 
 
@@ -48,8 +49,9 @@ class TestData:
     - `extra`: any other columns, by their name in the file, values as in the file
         (not converted); carried through on write.
     - `metadata`: the `# key: value` block. `length_mm`, `diameter_mm`,
-        `rate_mm_per_min`, `temperature_C` and `breaking_load_N` are floats in the
-        units their names say, checked when read; `control` is the channel the test
+        `rate_mm_per_min`, `temperature_C`, `breaking_load_N` and `breaking_strain`
+        (elongation / L0 at break, dimensionless) are floats in the units their
+        names say, checked when read; `control` is the channel the test
         imposed, `"force"` or `"elongation"` (see [`jaxcable.fit`][]'s `drive`;
         displacement, extension, position... are read as `"elongation"`); every
         other key (`material`, `id`, ...) is a string.
@@ -148,8 +150,8 @@ class TestData:
         `length_mm` is required; `diameter_mm` defaults to 3 mm and `rate_mm_per_min`
         (the crosshead speed) to 3 mm/min, Park's Dyneema SK78 test. The temperature
         is the metadata's `temperature_C`, else the mean of the temperature column,
-        else the `Cable` default (20 °C); the breaking load is `breaking_load_N` when
-        given, else the `Cable` default.
+        else the `Cable` default (20 °C); the breaking load is `breaking_load_N` and
+        the breaking strain `breaking_strain` when given, else the `Cable` defaults.
 
         **Returns:**
 

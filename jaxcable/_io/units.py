@@ -43,10 +43,12 @@ IGNORE = "-"
 class Bound(NamedTuple):
     """The values a numeric metadata key may take: those above `minimum` that stay
     above it in the [`jaxcable.Cable`][]'s SI units, where `(value - minimum) *
-    to_si` is positive (a length of 1e-320 mm is not: it is 0 m)."""
+    to_si` is positive (a length of 1e-320 mm is not: it is 0 m); finite, unless
+    `infinite` (then `inf` too)."""
 
     minimum: float
     to_si: float
+    infinite: bool = False
 
 
 # Metadata keys parsed as numbers, with the values the Cable accepts. Other keys are
@@ -57,6 +59,9 @@ NUMERIC_METADATA = {
     "rate_mm_per_min": Bound(0.0, M_PER_MM / 60),
     "temperature_C": Bound(-ZERO_CELSIUS, 1.0),  # above absolute zero
     "breaking_load_N": Bound(0.0, 1.0),
+    # Dimensionless (elongation / L0 at break); `inf` for a material that does not
+    # break, as the Cable accepts.
+    "breaking_strain": Bound(0.0, 1.0, infinite=True),
 }
 
 

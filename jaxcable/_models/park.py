@@ -1,16 +1,19 @@
 """Park et al.'s integrated nonlinear dynamic model of a polymer cable
-([`IntegratedModel`][]), one function per equation of the paper:
+([`IntegratedModel`][]), one function per mechanism:
 
 - Eq. 1, the static strain under hardening: [`static_strain`][];
 - Eq. 2, the hardening exponent: [`hardening_exponent`][];
-- Eq. 3, the Burgers creep (Kelvin-Voigt element and dashpot): [`creep_strain`][];
-- Eq. 4 and 7, the short- and long-term recoveries: [`recovery`][];
-- Eq. 5, the equivalent force: [`equivalent_force`][];
+- Eq. 3, 4 and 7, the creep and its short- and long-term recoveries: three
+  delayed-elastic elements that creep fast under load and recover slowly at rest,
+  [`delayed_elastic`][];
+- Eq. 3's dashpot, over the hours and days a robot runs: a stress-activated (Eyring)
+  flow, [`eyring_rate`][];
 - Eq. 8, the long-term retardation time: `IntegratedModel.retardation_time_long`;
-- Eq. 9, the strain from its terms: [`combined_strain`][].
+- Eq. 9, the strain from its terms: `IntegratedModel.advance`.
 
-Eq. 6 (the crosshead's strain, strain rate times time) is the constraint with which
-the rate-driven simulation solves for the loading time, not part of the model.
+Eq. 5-6 (the equivalent force and the crosshead's strain) are the constraint with
+which the rate-driven simulation solves for the loading time, not part of the model:
+`docs/model_notes.md` says why the equivalent force is no longer a state.
 """
 
 from typing import ClassVar
@@ -24,14 +27,7 @@ from .._arrays import field_array
 from .._cable import Cable
 from .._results import RESULTS
 from .base import AbstractCableModel, StrainParts, state_zero
-from .kernels import (
-    relaxation_average,
-    retarded,
-    running_max,
-    safe_pow,
-    tension_force,
-    tension_time_step,
-)
+from .kernels import retarded, running_max, safe_pow
 
 
 def hardening_exponent(
@@ -73,256 +69,189 @@ def static_strain(
     return safe_pow(force * compliance, h)
 
 
-def creep_strain(
-    impulse: Float[Array, ""],
-    t_total: Float[Array, ""],
-    t_c: Float[Array, ""],
-    modulus_area: Float[Array, ""],
-    viscosity_area: Float[Array, ""],
-) -> Float[Array, ""]:
-    r"""Park Eq. 3: the creep of the Burgers model, a Kelvin-Voigt element (E2c, t_c)
-    and a dashpot eta0 in series, under the equivalent force F_eq = I / T
-    ([`equivalent_force`][]) applied for the time under tension T:
-
-        c = F_eq (1 - exp(-T / t_c)) / (E2c A) + F_eq T / (eta0 A)
-          = I (1 - exp(-T / t_c)) / T / (E2c A) + I / (eta0 A).
-
-    The dashpot term is the exact dashpot strain for any force history; the
-    Kelvin-Voigt term is the paper's approximation of the hereditary integral (see
-    [`jaxcable.Hereditary`][] for the exact one). Written with I = \int F dt rather
-    than F_eq so that it stays finite, with finite gradients, at T = 0.
-
-    **Arguments:**
-
-    - `impulse`: I, N s.
-    - `t_total`: T, s.
-    - `t_c`: the creep retardation time, s.
-    - `modulus_area`: E2c A, N.
-    - `viscosity_area`: eta0 A, N s.
-
-    **Returns:**
-
-    The creep strain, dimensionless.
-    """
-    return impulse * (
-        relaxation_average(t_total, t_c) / modulus_area + 1.0 / viscosity_area
-    )
-
-
-def recovery(
+def delayed_elastic(
     previous: Float[Array, ""],
-    previous_target: Float[Array, ""],
-    force: Float[Array, ""],
-    modulus_area: Float[Array, ""],
+    target_previous: Float[Array, ""],
+    target: Float[Array, ""],
     dt: Float[Array, ""],
-    retardation_time: Float[Array, ""],
-) -> tuple[Float[Array, ""], Float[Array, ""]]:
-    """Park Eq. 4 (short-term) and Eq. 7 (long-term): a recovery strain
-    q = F / (E A) (1 - exp(-t / t_r)), a Kelvin-Voigt element (modulus E, retardation
-    time t_r) that follows its amplitude q_target = F / (E A).
-
-    The paper starts the full amplitude at the reversal; here the amplitude follows
-    the force (the model's docstring says how) and q obeys q' = (q_target - q) / t_r,
-    integrated exactly for an amplitude linear over the step: Eq. 4 / 7 for an
-    amplitude held from t = 0. Short-term: F = F_eq depth, E = E2r, t_r = t_r1;
-    long-term: F = F_m - F (the drop below the largest force), E = E3r, t_r = t_r2
-    (`IntegratedModel.retardation_time_long`).
-
-    **Arguments:**
-
-    - `previous`, `previous_target`: q and q_target at the previous sample.
-    - `force`: F at this sample, N.
-    - `modulus_area`: E A, N.
-    - `dt`: the step, s.
-    - `retardation_time`: t_r, s.
-
-    **Returns:**
-
-    `(q, q_target)` at this sample, dimensionless.
-    """
-    target = force / modulus_area
-    q = retarded(previous, previous_target, target, dt, retardation_time)
-    return q, target
-
-
-def equivalent_force(
-    impulse: Float[Array, ""], t_total: Float[Array, ""]
+    creep_time: Float[Array, ""],
+    recovery_time: Float[Array, ""] | None,
 ) -> Float[Array, ""]:
-    r"""Park Eq. 5's equivalent force F_eq = I / T: the mean force over the time under
-    tension, with I = \int F dt and T counted from the first loading (carried across
-    cycles, so that creep accumulates over them). It stands for the force in the
-    Burgers terms ([`creep_strain`][], the short-term recovery of [`recovery`][]).
+    """One delayed-elastic (Kelvin-Voigt) element that creeps towards its target
+    strain with retardation time `creep_time` and recovers from above it with
+    `recovery_time` (Park Eq. 3-4 and 7 with separate creep and recovery times).
+
+    The element obeys q' = (q_target - q) / tau, tau = `creep_time` while
+    q < q_target and `recovery_time` while q > q_target: the rate is continuous
+    (0 at q = q_target) and non-decreasing in q_target, so the element keeps the
+    order of its inputs (more load never leaves it shorter). Over a step with the
+    target linear from `target_previous` to `target`, the two exact updates
+    ([`jaxcable._models.kernels.retarded`][]) are combined by the larger (creep
+    faster than recovery) or the smaller, whichever follows the target faster:
+    exact while the target stays on one side of q, continuous and order-keeping
+    where it crosses (both updates are non-decreasing in q and in both targets).
 
     **Arguments:**
 
-    - `impulse`: I, N s.
-    - `t_total`: T, s (I itself while T = 0: nothing has loaded the cable).
+    - `previous`, `target_previous`: q and q_target at the previous sample.
+    - `target`: q_target at this sample.
+    - `dt`: the step, s.
+    - `creep_time`, `recovery_time`: the retardation times, s; `recovery_time`
+        None: the element never recovers (a permanent creep that saturates).
 
     **Returns:**
 
-    F_eq, N.
+    q at this sample, dimensionless.
     """
-    return impulse / jnp.where(t_total > 0, t_total, 1.0)
-
-
-def combined_strain(
-    static: Float[Array, ""],
-    static_max: Float[Array, ""],
-    drop: Float[Array, ""],
-    unloading_modulus_area: Float[Array, ""],
-    creep: Float[Array, ""],
-    short: Float[Array, ""],
-    long: Float[Array, ""],
-) -> StrainParts:
-    """Park Eq. 9: the strain of a sample from its terms, in the reading that is
-    continuous in the force history.
-
-    - instantaneous: the loading curve (the static strain at F), or below the
-        largest force F_m the unloading line from the peak, the static strain at F_m
-        less (F_m - F) / (E1r A), whichever is larger, so that it is never below the
-        loading curve (and never negative). On the first loading F = F_m and it is
-        the loading curve;
-    - plus the creep;
-    - minus the two recoveries, scaled by s = min(1, creep / (short + long)): the
-        recoveries remove at most the creep that produced them.
-
-    **Arguments:**
-
-    - `static`, `static_max`: the static strain ([`static_strain`][]) at F and at
-        F_m.
-    - `drop`: F_m - F, N.
-    - `unloading_modulus_area`: E1r A, N.
-    - `creep`: the creep strain ([`creep_strain`][]).
-    - `short`, `long`: the recovery strains ([`recovery`][]).
-
-    **Returns:**
-
-    The [`jaxcable.StrainParts`][].
-    """
-    inst = jnp.maximum(static_max - drop / unloading_modulus_area, static)
-    total_recovery = short + long
-    excess = total_recovery > creep
-    share = jnp.where(excess, creep / jnp.where(excess, total_recovery, 1.0), 1.0)
-    return StrainParts(
-        instantaneous=inst,
-        creep=creep,
-        recovery_short=short * share,
-        recovery_long=long * share,
+    creep = retarded(previous, target_previous, target, dt, creep_time)
+    if recovery_time is None:
+        return jnp.maximum(creep, previous)
+    recover = retarded(previous, target_previous, target, dt, recovery_time)
+    faster_creep = creep_time <= recovery_time
+    return jnp.where(
+        faster_creep, jnp.maximum(creep, recover), jnp.minimum(creep, recover)
     )
+
+
+# sinh's argument is capped here (far beyond any rope's breaking stress) so that the
+# rate stays finite: a strain beyond break is reported, not an overflow.
+_EYRING_CAP = 60.0
+
+
+def eyring_rate(
+    stress: Float[Array, ""],
+    viscosity: Float[Array, ""],
+    activation_stress: Float[Array, ""],
+) -> Float[Array, ""]:
+    """The plastic flow rate of a stress-activated (Eyring) process,
+    (sigma_a / eta0) sinh(sigma / sigma_a), 1/s: Park's dashpot sigma / eta0
+    (Eq. 3) at stresses well below sigma_a, growing exponentially above it, as the
+    plateau creep rate of HMPE fibres does (`docs/model_notes.md` cites the data).
+
+    **Arguments:**
+
+    - `stress`: sigma = F / A, Pa (>= 0).
+    - `viscosity`: eta0, Pa s.
+    - `activation_stress`: sigma_a, Pa.
+
+    **Returns:**
+
+    The strain rate, 1/s.
+    """
+    x = jnp.minimum(stress / activation_stress, _EYRING_CAP)
+    return activation_stress / viscosity * jnp.sinh(x)
 
 
 class IntegratedState(eqx.Module):
     """Scan carry of [`jaxcable.IntegratedModel`][] for one cable (all SI).
 
     Every field is a continuous function of the force history (no branch flag, no
-    clock restarted at a reversal): see the model's docstring.
+    clock restarted at a reversal), and a non-decreasing one: see the model's
+    docstring.
 
     **Fields:**
 
     - `force`: force of the previous sample, N.
     - `strain`: total strain of the previous sample (the epsilon_{i-1} of Park Eq. 2).
-    - `impulse`: integral of F dt since the first loading, N s (trapezoid rule over
-        every step: exact for a force linear between samples).
-    - `t_total`: time under tension since the first loading, s (a step at a force
-        below F_on counts in proportion to the force; see
-        `jaxcable._models.kernels.tension_time_step`).
-    - `force_max`: the largest force so far, N (F_f of Park Eq. 7 and 9).
-    - `short`, `long`: short- and long-term recovery strains before the creep bound
-        (Park Eq. 4 and 7).
-    - `short_target`, `long_target`: the recovery amplitudes they relax towards at
-        the previous sample.
+    - `force_max`: the largest force so far, N (F_f of Park Eq. 9).
+    - `permanent`: the creep that does not recover (Park Eq. 3's Kelvin-Voigt
+        element, E2c), strain.
+    - `short`, `long`: the creep that recovers in minutes (E2r, Park Eq. 4) and in
+        hours (E3r, Park Eq. 7), strains.
+    - `short_max`, `long_max`: the largest `short` and `long` so far (their recovery
+        is reported as the distance below them).
+    - `flow`: the Eyring flow strain (Park Eq. 3's dashpot).
     """
 
     force: Float[Array, ""]
     strain: Float[Array, ""]
-    impulse: Float[Array, ""]
-    t_total: Float[Array, ""]
     force_max: Float[Array, ""]
+    permanent: Float[Array, ""]
     short: Float[Array, ""]
     long: Float[Array, ""]
-    short_target: Float[Array, ""]
-    long_target: Float[Array, ""]
+    short_max: Float[Array, ""]
+    long_max: Float[Array, ""]
+    flow: Float[Array, ""]
 
 
-# Parameters that must be finite and > 0 (moduli, viscosity, time constants).
-_POSITIVE = ("E1c", "E1r", "E2c", "t_c", "eta0", "E2r", "t_r1", "E3r", "lambda1")
+# Parameters that must be finite and > 0 (moduli, viscosities, stresses, times).
+_POSITIVE = (
+    "E1c",
+    "E1r",
+    "E2c",
+    "t_c",
+    "eta0",
+    "E2r",
+    "t_r1",
+    "E3r",
+    "lambda1",
+    "t_e",
+    "sigma_a",
+)
 
 
 class IntegratedModel(AbstractCableModel[IntegratedState]):
     r"""Park et al.'s integrated nonlinear dynamic model of a polymer cable, in a
-    reading that is continuous in the force history.
+    reading that holds on his experiments as he ran them and over the hours and days
+    a robot runs.
 
-    Strain (dimensionless) of sample i, with A the cross-section, I = \int F dt (from
-    the first loading, trapezoid rule), T the time under tension since the first
-    loading (carried across cycles) and F_m the largest force so far
-    (`docs/continuity.md` derives and measures the reading):
+    Strain (dimensionless) of sample i, with A the cross-section, sigma = F / A and
+    F_m the largest force so far (`docs/model_notes.md` derives the reading and cites
+    its sources):
 
     - instantaneous (Park Eq. 1-2 and the first terms of Eq. 9):
       e_i = max((F_m / (E1c A))**h - (F_m - F) / (E1r A), (F / (E1c A))**h),
-      with the hardening exponent h = 1 + beta * eps_{i-1}**gamma (Eq. 2). On the
-      first loading F = F_m and this is (F / (E1c A))**h (Eq. 9, loading); below the
-      largest force it is Eq. 9's unloading line from the peak F_f = F_m, on which
-      the cable also reloads (the bedding-in of a rope: the first loading sets a
-      permanent constructional elongation, later cycles below it are stiffer). The
-      max keeps it at or above the loading curve, so it is never negative;
-    - creep (Park Eq. 3 under the equivalent force I / T of Eq. 5):
-      c = (I / T) (1 - exp(-T / t_c)) / (E2c A) + I / (eta0 A). The paper prints the
-      dashpot term as F_eq / (eta0 A), which is not a strain; F_eq T / (eta0 A) =
-      I / (eta0 A) is the Burgers dashpot of Eq. 3, exact for any force history;
-    - recoveries (Park Eq. 4 and 7), each a Kelvin-Voigt strain q relaxing towards
-      an amplitude set by how far the force has fallen below F_m,
-      q' = (q_target - q) / t_r, with
-      short: q_target = (I / T) ((F_m - F) / F_m) / (E2r A), t_r = t_r1 (Eq. 4-5);
-      long: q_target = (F_m - F) / (E3r A), t_r = t_r2 = lambda1 / (v / L0)**2 -
-      lambda2 (Eq. 7-8);
-    - eps = e + c - s (q_short + q_long), with s = min(1, c / (q_short + q_long)):
-      the recoveries remove at most the creep that produced them, so no history
-      leaves the cable shorter than its instantaneous set (>= 0).
+      with h = 1 + beta eps_{i-1}**gamma (Eq. 2). On the first loading F = F_m and
+      this is the loading curve; below F_m it is Eq. 9's unloading line from the peak,
+      on which the cable also reloads (the bedding-in of a braid: the first loading
+      sets a permanent constructional elongation F_m (1/E1c - 1/E1r) / A);
+    - creep (Park Eq. 3, 4 and 7): three delayed-elastic elements q_k, each relaxing
+      towards F / (E_k A) ([`delayed_elastic`][]), fast while below it (creep, or
+      re-extension after a rest) and slowly while above it (recovery):
+      permanent (E2c): creeps with t_c, never recovers;
+      short-term (E2r): creeps with t_e, recovers with t_r1 (Eq. 4);
+      long-term (E3r): creeps with t_e, recovers with t_r2 = lambda1 (L0 / v)**2 -
+      lambda2 (Eq. 7-8).
+      Each saturates at F / (E_k A): the primary creep of HMPE is bounded;
+    - flow (Park Eq. 3's dashpot): eps_p' = (sigma_a / eta0) sinh(sigma / sigma_a),
+      Park's sigma / eta0 at low stress, the stress-activated plateau creep of HMPE
+      fibres above (an Eyring process, [`eyring_rate`][]);
+    - eps = e + q_permanent + q_short + q_long + eps_p.
 
-    **Why this reading.** Eq. 9 as printed switches on a loading/unloading flag and
-    starts both recoveries, at full amplitude, on a clock restarted at the reversal.
-    Under a measured force every downward noise blip is a reversal: the strain jumps
-    by a share of the full short-term amplitude however small the blip (measured on
-    the previous reading: 1e-6 N of noise moved a 300 mm cable by 0.95 mm). Here no
-    state depends on the sign of a force change: every memory (I, T, F_m, the two
-    recovery strains) is Lipschitz-continuous in the force history, and a force
-    perturbation d moves the strain by at most about
-    d (1/E1r + 1/E2r + 1/E3r) / A plus what d integrates to through the creep terms.
-    The recovery amplitudes grow with the depth of the unloading, in proportion to
-    the force drop, as Boltzmann superposition of a load decrease makes them; they
-    reach Park's amplitudes (I / T) / (E2r A) and F_f / (E3r A) at 0 N, and a
-    reloading takes them back at the same rates.
+    **Properties** (each tested): the strain is continuous in the force history (no
+    state switches on the sign of a force change); it is never negative (every term
+    is >= 0); more load never makes the cable shorter (with beta = 0: every memory
+    is non-decreasing in the force and in the other memories, the strain is
+    non-decreasing in each, and the update of a sample keeps that order; with
+    beta > 0 the hardening of Eq. 2 lowers the static strain as the previous strain
+    grows); a rested cable stretches back on reloading (the elements re-extend with
+    t_e, as Park's second tensile tests measured, Table 3); and a long hold stays
+    bounded (the elements saturate, the flow is the slow plateau creep).
 
-    **On Park's paths** (a loading, a full unloading, a rest at 0 N) the loading
-    branch and the instantaneous unloading are Eq. 1-9 exactly, and so are both
-    recoveries from the moment the force reaches 0 N, up to the lag built up while
-    the amplitude ramps in during the unloading (Park starts the full amplitude at the
-    reversal): that lag decays as exp(-tau / t_r). `docs/continuity.md` measures the
-    difference on Park's protocols. Cycles reload along the unloading line instead of
-    jumping back to the loading curve at 0 N.
+    The reported parts: `instantaneous` e; `creep` q_permanent + max q_short +
+    max q_long + eps_p (the largest creep each element reached); `recovery_short`
+    and `recovery_long` how far q_short and q_long are below their largest values.
 
-    Hysteresis is not modelled separately: it emerges from creep, hardening and
-    recovery (Park Section 3.3). The equivalent force I / T replaces the hereditary
-    integral of the Kelvin-Voigt creep (exact for the dashpot, up to a factor 2 off
-    for the Kelvin-Voigt element under a long ramp; [`jaxcable.Hereditary`][] is the
-    exact superposition); this is the paper's model, kept as printed.
-
-    The default parameters are a Dyneema SK78 3 mm set fitted to the numbers Park
-    prints (Table 1 of the fitted parameters is lost): [`jaxcable.papers.calibrate_sk78`][]
-    (Levenberg-Marquardt on the errors, in %, of the creep ratio, the residual
-    elongations and Table 3; all < 5 %), rounded to 4 digits; see
-    `notebooks/01_papers.ipynb`.
+    **Defaults.** A Dyneema SK78 3 mm set: [`jaxcable.papers.calibrate_sk78`][]
+    fitted to every number Park prints, each computed by simulating the test he ran
+    ([`jaxcable.papers.sk78_targets_report`][]), with the flow (eta0, sigma_a)
+    anchored on published HMPE creep rates; beta = 0: Park's tests do not identify
+    the hardening (see `docs/model_notes.md`).
 
     **Fields (SI):**
 
     - `E1c`: static (instantaneous) loading modulus, Pa (Eq. 1).
     - `beta`, `gamma`: hardening parameters, dimensionless (Eq. 2).
     - `E1r`: instantaneous unloading modulus, Pa (Eq. 9).
-    - `E2c`: Kelvin-Voigt creep modulus, Pa; `t_c`: creep retardation time, s (Eq. 3).
-    - `eta0`: dashpot viscosity, Pa s (Eq. 3).
-    - `E2r`: short-term recovery modulus, Pa; `t_r1`: its retardation time, s (Eq. 4).
-    - `E3r`: long-term recovery modulus, Pa (Eq. 7).
-    - `lambda1` (1/s), `lambda2` (s): long-term retardation time law (Eq. 8).
+    - `E2c`: modulus of the creep that does not recover, Pa; `t_c`: its creep
+        retardation time, s (Eq. 3).
+    - `eta0`: the flow's viscosity at low stress, Pa s (Eq. 3).
+    - `E2r`: modulus of the short-term recoverable creep, Pa; `t_r1`: its recovery
+        time, s (Eq. 4).
+    - `E3r`: modulus of the long-term recoverable creep, Pa (Eq. 7).
+    - `lambda1` (1/s), `lambda2` (s): its recovery time law (Eq. 8).
+    - `t_e`: creep (and re-extension) time of the recoverable creep, s.
+    - `sigma_a`: the flow's activation stress, Pa.
     """
 
     # The drives solve a time or force only up to this strain (see
@@ -330,18 +259,20 @@ class IntegratedModel(AbstractCableModel[IntegratedState]):
     # eps**gamma) makes the strain almost independent of the force.
     SOLVED_STRAIN_LIMIT: ClassVar[float] = 1.0
 
-    E1c: Float[Array, ""] = eqx.field(converter=field_array, default=2.597e9)
-    beta: Float[Array, ""] = eqx.field(converter=field_array, default=0.05465)
-    gamma: Float[Array, ""] = eqx.field(converter=field_array, default=2.258)
-    E1r: Float[Array, ""] = eqx.field(converter=field_array, default=2.63e9)
-    E2c: Float[Array, ""] = eqx.field(converter=field_array, default=3.888e8)
-    t_c: Float[Array, ""] = eqx.field(converter=field_array, default=8.251)
-    eta0: Float[Array, ""] = eqx.field(converter=field_array, default=4.504e11)
-    E2r: Float[Array, ""] = eqx.field(converter=field_array, default=3.709e9)
-    t_r1: Float[Array, ""] = eqx.field(converter=field_array, default=35.88)
-    E3r: Float[Array, ""] = eqx.field(converter=field_array, default=7.906e8)
-    lambda1: Float[Array, ""] = eqx.field(converter=field_array, default=0.002825)
-    lambda2: Float[Array, ""] = eqx.field(converter=field_array, default=-80.84)
+    E1c: Float[Array, ""] = eqx.field(converter=field_array, default=2.591e9)
+    beta: Float[Array, ""] = eqx.field(converter=field_array, default=0.0)
+    gamma: Float[Array, ""] = eqx.field(converter=field_array, default=2.0)
+    E1r: Float[Array, ""] = eqx.field(converter=field_array, default=2.594e9)
+    E2c: Float[Array, ""] = eqx.field(converter=field_array, default=6.838e9)
+    t_c: Float[Array, ""] = eqx.field(converter=field_array, default=0.8772)
+    eta0: Float[Array, ""] = eqx.field(converter=field_array, default=1.2e16)
+    E2r: Float[Array, ""] = eqx.field(converter=field_array, default=6.032e9)
+    t_r1: Float[Array, ""] = eqx.field(converter=field_array, default=6.4)
+    E3r: Float[Array, ""] = eqx.field(converter=field_array, default=8.045e8)
+    lambda1: Float[Array, ""] = eqx.field(converter=field_array, default=0.003322)
+    lambda2: Float[Array, ""] = eqx.field(converter=field_array, default=-157.2)
+    t_e: Float[Array, ""] = eqx.field(converter=field_array, default=4.241)
+    sigma_a: Float[Array, ""] = eqx.field(converter=field_array, default=4e7)
 
     def __check_init__(self):
         _checks.check_parameters("IntegratedModel", self, _POSITIVE)
@@ -355,7 +286,7 @@ class IntegratedModel(AbstractCableModel[IntegratedState]):
         )
 
     def retardation_time_long(self, cable: Cable) -> Float[Array, ""]:
-        """Park Eq. 8: the long-term retardation time t_r2 = lambda1 (L0 / v)^2 -
+        """Park Eq. 8: the long-term recovery time t_r2 = lambda1 (L0 / v)^2 -
         lambda2, s, at the strain rate v / L0 of `cable`. It must be positive: `check`
         flags a cable whose strain rate makes it not."""
         return self.lambda1 / cable.strain_rate**2 - self.lambda2
@@ -378,13 +309,13 @@ class IntegratedModel(AbstractCableModel[IntegratedState]):
         return IntegratedState(
             force=zero,
             strain=zero,
-            impulse=zero,
-            t_total=zero,
             force_max=zero,
+            permanent=zero,
             short=zero,
             long=zero,
-            short_target=zero,
-            long_target=zero,
+            short_max=zero,
+            long_max=zero,
+            flow=zero,
         )
 
     def advance(
@@ -399,60 +330,49 @@ class IntegratedModel(AbstractCableModel[IntegratedState]):
         # force change (the class docstring says why).
         del direction
         area = cable.area
-        # Trapezoid impulse, exact for a force linear over the step; time under
-        # tension, a continuous ramp near 0 N so that noise around 0 N during a rest
-        # neither counts the rest as loading nor switches it on and off.
-        impulse = state.impulse + 0.5 * (state.force + force) * dt
         force_max = running_max(state.force_max, force)
-        t_total = state.t_total + tension_time_step(
-            state.force, force, dt, cable, force_max
-        )
 
-        # Eq. 1-2 with h from the previous sample's total strain, at F and at F_m.
+        # Eq. 1-2 with h from the previous sample's total strain, at F and at F_m;
+        # Eq. 9's unloading line from F_m, never below the loading curve.
         compliance_c = 1.0 / (self.E1c * area)
         h = hardening_exponent(state.strain, self.beta, self.gamma)
         static = static_strain(force, compliance_c, h)
         static_max = static_strain(force_max, compliance_c, h)
-        drop = force_max - force
+        inst = jnp.maximum(static_max - (force_max - force) / (self.E1r * area), static)
 
-        creep = creep_strain(
-            impulse, t_total, self.t_c, self.E2c * area, self.eta0 * area
-        )
+        def element(q, modulus, creep_time, recovery_time):
+            ca = 1.0 / (modulus * area)
+            return delayed_elastic(
+                q, state.force * ca, force * ca, dt, creep_time, recovery_time
+            )
 
-        # Recovery amplitudes in proportion to the drop below the largest force
-        # (Park's amplitudes at F = 0). The depth's scale is at least F_on, so that
-        # before any real loading (F_m at the level of the noise) the depth stays
-        # proportional to the noise.
-        depth = drop / jnp.maximum(force_max, tension_force(cable, force_max))
-        short, short_target = recovery(
-            state.short,
-            state.short_target,
-            equivalent_force(impulse, t_total) * depth,
-            self.E2r * area,
-            dt,
-            self.t_r1,
+        permanent = element(state.permanent, self.E2c, self.t_c, None)
+        short = element(state.short, self.E2r, self.t_e, self.t_r1)
+        long = element(
+            state.long, self.E3r, self.t_e, self.retardation_time_long(cable)
         )
-        long, long_target = recovery(
-            state.long,
-            state.long_target,
-            drop,
-            self.E3r * area,
-            dt,
-            self.retardation_time_long(cable),
-        )
+        # Trapezoid rule over the step: exact for a rate linear in time.
+        rate0 = eyring_rate(state.force / area, self.eta0, self.sigma_a)
+        rate1 = eyring_rate(force / area, self.eta0, self.sigma_a)
+        flow = state.flow + 0.5 * (rate0 + rate1) * dt
 
-        parts = combined_strain(
-            static, static_max, drop, self.E1r * area, creep, short, long
+        short_max = jnp.maximum(state.short_max, short)
+        long_max = jnp.maximum(state.long_max, long)
+        parts = StrainParts(
+            instantaneous=inst,
+            creep=permanent + short_max + long_max + flow,
+            recovery_short=short_max - short,
+            recovery_long=long_max - long,
         )
         new_state = IntegratedState(
             force=force,
             strain=parts.total,
-            impulse=impulse,
-            t_total=t_total,
             force_max=force_max,
+            permanent=permanent,
             short=short,
             long=long,
-            short_target=short_target,
-            long_target=long_target,
+            short_max=short_max,
+            long_max=long_max,
+            flow=flow,
         )
         return new_state, parts

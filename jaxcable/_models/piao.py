@@ -144,11 +144,24 @@ def superposed_strain(
     stress acting on the unloading family (the parameters with subscript UL). The
     strain is the sum of the two families' strains ([`family_step`][]): the loading
     family driven by the largest stress so far, the unloading family by the drop
-    below it (<= 0).
+    below it (<= 0), the unloading family's recovery bounded by what the loading
+    family added.
 
     Eq. 2 prints eta_UL2 in the exponent of the E_UL3 term; the superposition gives
     eta_UL3 there, and that is what this sum computes. Eq. 3 (the strain after the
     unloading) is the same sum with the unloading stress held.
+
+    **Recovery bound.** With added = spring_L + q_L2 + q_L3 (>= 0) and
+    removed = -(spring_UL + q_UL2 + q_UL3) (>= 0), the three unloading terms are
+    scaled by s = min(1, added / removed), so the strain is
+    max(added - removed, 0): a cable recovers at most the elongation it was given
+    and never ends shorter than new. With equal L and UL sets and a non-negative
+    force, removed <= added (the linear solid's strain is >= 0) and s = 1: the
+    terms are returned unscaled, bit for bit. With distinct sets the bound is active
+    wherever the UL set would remove more than the L set added (a softer UL set
+    after a long enough rest; `docs/model_notes.md` point 10). s is continuous
+    (s * removed = min(removed, added)), so the strain stays continuous in the
+    force history.
 
     **Arguments:**
 
@@ -161,11 +174,29 @@ def superposed_strain(
     """
     spring_L, q_L2, q_L3 = loading
     spring_UL, q_UL2, q_UL3 = unloading
-    return StrainParts(
+    unbounded = StrainParts(
         instantaneous=spring_L + spring_UL,
         creep=q_L2 + q_L3,
         recovery_short=-q_UL2,
         recovery_long=-q_UL3,
+    )
+    added = spring_L + unbounded.creep
+    removed = unbounded.recovery_short + unbounded.recovery_long - spring_UL
+    excess = removed > added
+    # Double `where`: finite gradients where removed = 0 (then excess is False).
+    share = added / jnp.where(excess, removed, 1.0)
+    # Where the bound is inactive, the unbounded parts themselves (bit for bit).
+    return StrainParts(
+        instantaneous=jnp.where(
+            excess, spring_L + share * spring_UL, unbounded.instantaneous
+        ),
+        creep=unbounded.creep,
+        recovery_short=jnp.where(
+            excess, share * unbounded.recovery_short, unbounded.recovery_short
+        ),
+        recovery_long=jnp.where(
+            excess, share * unbounded.recovery_long, unbounded.recovery_long
+        ),
     )
 
 
@@ -201,15 +232,37 @@ class FiveElementModel(AbstractCableModel[FiveElementState]):
     The force is linear between samples, so both parts are piecewise linear over a
     step (the running maximum has one kink, where the stress passes its previous
     maximum) and each element is advanced by its exact exponential update, split at
-    that kink (no time-step error). With equal L and UL parameters this is the linear
-    five-element (generalised Kelvin) solid: Eq. 1 and Eq. 3 hold exactly as printed
-    (Eq. 3 being the instantaneous-unloading limit) and Eq. 2 in its superposition
-    reading. On Piao's paths (a load step or ramp from zero, one unloading, a rest)
-    sigma_L is the applied load and sigma_UL the removed one, so this is exactly the
-    superposition of Eq. 2-3. With different sets the loading family keeps relaxing
-    towards sigma_L while the unloading family recovers with its own kernel, so a
-    load-unload cycle leaves sigma_0 (1/E_L1 - 1/E_UL1) at once, plus the difference
-    of the two families' retarded strains.
+    that kink (no time-step error).
+
+    **Where this is Eq. 1-3.** Eq. 1 holds exactly, for any L and UL sets, while the
+    stress never falls below its largest value so far (the UL family is then idle).
+    Eq. 2-3 as printed evaluate the *whole* history with the UL kernel,
+    eps = sigma_0 (J_UL(t) - J_UL(t - t_r)) after an instant unloading
+    (J(t) = 1/E_1 + sum_k (1 - exp(-E_k t / eta_k)) / E_k, the creep compliance).
+    With equal L and UL sets this is the linear five-element (generalised Kelvin)
+    solid and equals Eq. 1-3 exactly (Eq. 2 in its superposition reading, for any
+    unloading ramp; Eq. 3 its instantaneous limit). With distinct sets it cannot be:
+    the printed Eq. 1 ends at sigma_0 J_L(t_r) and Eq. 2 starts at sigma_0 J_UL(t_r),
+    a jump at the reversal. Here the loading family keeps its L kernel, so after a
+    load step sigma_0 (held to t_r, then any unloading to 0) the strain is
+
+        eps(t) = max(Eq. 2-3 + D(t), 0),   D(t) = sigma_0 (J_L(t) - J_UL(t)),
+
+    t counted from the load step: D(t_r) at the reversal, tending to the permanent
+    set sigma_0 sum_k (1/E_Lk - 1/E_ULk), which is negative when the UL set is the
+    more compliant (`docs/model_notes.md` point 10 gives measured numbers).
+
+    **Recovery bound.** The unloading family removes at most what the loading family
+    added ([`superposed_strain`][]): its three terms are scaled by
+    s = min(1, added / removed), so eps = max(added - removed, 0) >= 0 for any L and
+    UL sets, and no history leaves the cable shorter than new. With equal sets and a
+    non-negative force s = 1 and the strain is bit for bit the unbounded linear
+    solid's (monotone in the load: adding a non-negative force to any history never
+    shortens the cable later). The bound acts on the strain only, not on the
+    states: while it is active the UL elements keep their excess recovery, which a
+    later reloading takes back first (a cable reloaded after a bounded rest lengthens
+    later than a new one; measured in `docs/model_notes.md` point 10). Capping the
+    states instead would lose the continuity bound below.
 
     **Cycles below the previous maximum.** A reloading that stays below the largest
     stress so far raises sigma_UL back towards 0: it takes the recovery back with the
@@ -226,19 +279,22 @@ class FiveElementModel(AbstractCableModel[FiveElementState]):
 
         (d / A) (1/E_L1 + 1/E_L2 + 1/E_L3 + 2 (1/E_UL1 + 1/E_UL2 + 1/E_UL3)),
 
-    however long or noisy the history. `direction` is not used.
+    however long or noisy the history (the recovery bound, max(added - removed, 0),
+    moves by no more than added and removed do). `direction` is not used.
 
-    **Strain parts.** `instantaneous` = sigma_L / E_L1 + sigma_UL / E_UL1 (both springs),
-    `creep` = q_L2 + q_L3, `recovery_short` = -q_UL2, `recovery_long` = -q_UL3.
+    **Strain parts.** `instantaneous` = sigma_L / E_L1 + s sigma_UL / E_UL1 (both
+    springs), `creep` = q_L2 + q_L3, `recovery_short` = -s q_UL2, `recovery_long` =
+    -s q_UL3, with s the recovery bound's share (1 unless the bound is active).
 
     **Default parameters.** Loading: Piao Table 1 ([`jaxcable.PIAO_TABLE1`][]),
     E_L2 = 9.5e9 Pa, E_L3 = 5.0e10 Pa, eta_L2 = 1.0e10 Pa s (tau_2 ~ 1.05 s),
     eta_L3 = 1.0e13 Pa s (tau_3 = 200 s). E_L1 is
     a function of payload and cable length in the paper (Table 3); the default
-    2.2e14 Pa is that surface at the robot's maximum payload 65 kg on a 7.4 m cable, read
-    as described in [`jaxcable.PIAO_TABLE3`][] (Pa, as Table 1's unit says). It makes
-    the spring practically rigid (strain < 1e-6 at the paper's loads): the elongation
-    Piao fitted is carried by the two Kelvin-Voigt elements. The unloading table
+    2.2e14 Pa is the Table 3 surface at the robot's maximum payload 65 kg on a 7.4 m
+    cable, read as described in [`jaxcable.PIAO_TABLE3`][]: Table 3's parameter and
+    unit did not survive, and this value, about 2000 times the UHMWPE fibre modulus,
+    is not a measured spring. It makes the spring practically rigid (strain < 1e-6 at
+    the paper's loads): the elongation is carried by the two Kelvin-Voigt elements. The unloading table
     (Table 2) is lost, so **the unloading parameters default to the loading ones**
     (E_UL1 = E_L1, E_UL2 = E_L2, ...): the default model is the linear five-element
     solid, which recovers fully after unloading.
@@ -270,6 +326,10 @@ class FiveElementModel(AbstractCableModel[FiveElementState]):
         _checks.check_parameters("FiveElementModel", self, _FIVE_ELEMENT_FIELDS)
 
     def check(self, cable: Cable) -> RESULTS:
+        """`RESULTS.parameter_out_of_domain` unless every modulus and viscosity is
+        finite and > 0 (traced; `__init__` raises for concrete values). Any pair of
+        L and UL sets is admissible: the recovery bound keeps the strain >= 0
+        whatever their relation, so distinct sets need no flag."""
         return _checks.domain_result(_checks.parameters_ok(self, _FIVE_ELEMENT_FIELDS))
 
     def init(self, cable: Cable) -> FiveElementState:

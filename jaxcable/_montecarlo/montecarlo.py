@@ -68,6 +68,11 @@ class MonteCarloResult(eqx.Module):
     - `num_draws`: the number of draws.
     - `num_successful`: successful draws per cable, shape `(cables,)`; the statistics
         use these only.
+    - `num_broken`: per cable, shape `(cables,)`, the draws whose cable was strained
+        beyond its breaking strain (`Cable.breaking_strain`) before any other
+        failure: `status_counts["strain_beyond_break"]`. These draws are excluded
+        from the statistics like any failure; a high count says that the loads
+        break the cable for that share of the drawn parameters.
     - `status_counts`: `{RESULTS member name: count per cable}`; they sum to
         `num_draws` for every cable. A draw that fails for one cable (e.g. a Newton
         solve that does not converge) is excluded for that cable only.
@@ -87,6 +92,7 @@ class MonteCarloResult(eqx.Module):
     max: Float[Array, "cables samples"]
     num_draws: int = eqx.field(static=True)
     num_successful: Int[Array, " cables"]
+    num_broken: Int[Array, " cables"]
     status_counts: dict[str, Int[Array, " cables"]]
     method: str = eqx.field(static=True)
     elongation: Float[Array, "draws cables samples"] | None = None
@@ -140,7 +146,10 @@ def monte_carlo(
 
     A (draw, cable) whose simulation fails (`RESULTS` other than `successful`, e.g. a
     Newton solve that does not converge, or a drawn parameter outside its domain) is
-    counted in `status_counts` and excluded from that cable's statistics.
+    counted in `status_counts` and excluded from that cable's statistics. A draw
+    that strains a cable beyond its breaking strain (`Cable.breaking_strain`) is
+    such a failure, `RESULTS.strain_beyond_break`, and is also counted in
+    `num_broken`.
 
     **Percentiles in bounded memory.** `method="exact"` keeps every draw on the host
     (draws x cables x samples values) and calls `numpy.percentile`. `method="histogram"`
@@ -349,6 +358,9 @@ def monte_carlo(
         max=as_dtype(nan_if_none(merged.maximum)),
         num_draws=num_draws,
         num_successful=jnp.asarray(n_ok),
+        num_broken=jnp.asarray(
+            merged.status[STATUS_NAMES.index("strain_beyond_break")]
+        ),
         status_counts={
             n: jnp.asarray(status) for n, status in zip(STATUS_NAMES, merged.status)
         },

@@ -12,7 +12,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from .._arrays import field_array
-from .._cable import Cable
+from .._cable import DEFAULT_BREAKING_STRAIN, Cable
 from .._drive import GRAVITY
 from .._models import IntegratedModel
 
@@ -56,6 +56,10 @@ class Robot(eqx.Module):
     - `platform_mass`: mass of the end-effector without payload, kg.
     - `min_tension`: the least tension of every cable, N (taut cables).
     - `diameter`, `breaking_load`: of every cable, m and N (6 mm Dyneema).
+    - `breaking_strain`: of every cable, dimensionless (elongation / L0 at break):
+        Piao's rope's is not printed, so that of the 3 mm Dyneema cable,
+        `jaxcable.DEFAULT_BREAKING_STRAIN` (a strain, unlike a load, does not
+        scale with the cross-section).
     - `strain_rate`: 1/s, sets each cable's `speed` = length * strain_rate.
     """
 
@@ -68,6 +72,9 @@ class Robot(eqx.Module):
     diameter: Float[Array, ""] = eqx.field(converter=field_array, default=DIAMETER)
     breaking_load: Float[Array, ""] = eqx.field(
         converter=field_array, default=BREAKING_LOAD
+    )
+    breaking_strain: Float[Array, ""] = eqx.field(
+        converter=field_array, default=DEFAULT_BREAKING_STRAIN
     )
     strain_rate: Float[Array, ""] = eqx.field(
         converter=field_array, default=STRAIN_RATE
@@ -104,6 +111,7 @@ class Robot(eqx.Module):
             diameter=self.diameter,
             speed=lengths * self.strain_rate,
             breaking_load=self.breaking_load,
+            breaking_strain=self.breaking_strain,
         )
 
 

@@ -115,7 +115,7 @@ def pick_and_place(
 
 # The parameters drawn for the real cables: every modulus, viscosity and time of the
 # integrated model (the hardening and long-term-recovery laws keep their values).
-REAL_PARAMETERS = ("E1c", "E1r", "E2c", "t_c", "eta0", "E2r", "t_r1", "E3r")
+REAL_PARAMETERS = ("E1c", "E1r", "E2c", "t_c", "eta0", "E2r", "t_r1", "E3r", "t_e")
 
 
 def real_cables(
