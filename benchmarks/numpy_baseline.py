@@ -14,9 +14,10 @@ It is the same model as `jaxcable.IntegratedModel.advance` (Park Eq. 1-9 with th
 readings of docs/model_notes.md: the instantaneous strain with hardening and the
 unloading line from the largest force, three delayed-elastic elements - permanent,
 short- and long-term recoverable - and an Eyring flow) and the same time solve as
-`jaxcable.simulate_rate_test` (Park Eq. 5 = Eq. 6 per force sample, relative strain residual, Newton with an
-analytic derivative): a Python loop over the samples, vectorised over the batch of
-cables, Newton iterations in NumPy until every cable of the batch has converged.
+`jaxcable.simulate_rate_test` (Park Eq. 5 = Eq. 6 per force sample, relative strain
+residual, Newton with an analytic derivative): a Python loop over the samples,
+vectorised over the batch of cables, Newton iterations in NumPy until every cable of
+the batch has converged.
 """
 
 import argparse
@@ -60,8 +61,8 @@ _POSITIVE = (
     "t_e",
     "sigma_a",
 )
-# As jaxcable._drive.simulate: residual = strain error / (|strain at the start of the step|
-# + |crosshead strain at the guessed end| + floor).
+# As jaxcable._drive.drives: residual = strain error / (|strain at the start of the
+# step| + |crosshead strain at the guessed end| + floor).
 _STRAIN_FLOOR = 1e-4
 
 

@@ -371,6 +371,7 @@ def _cables(lengths, temperatures):
         diameter=jnp.full(n, 3e-3),
         speed=jnp.full(n, CABLE.speed),
         breaking_load=jnp.full(n, 2000.0),
+        breaking_strain=jnp.full(n, jc.DEFAULT_BREAKING_STRAIN),
         temperature=jnp.asarray(temperatures),
     )
 

@@ -365,6 +365,25 @@ def test_surface_trend_matches_text():
     assert jnp.mean(d_length_printed > 0) > 0.5
 
 
+def test_surface_span_against_fibre_modulus():
+    """Table 3's parameter and unit did not survive (docs/model_notes.md point 12):
+    over Piao's range (10-100 kg, 5.4-8.4 m) the preset's reading spans 3.7e12 to
+    6.1e14 Pa (31-6100 x the UHMWPE fibre modulus, 100-120 GPa), the printed order
+    1.3e12 to 5.4e12 Pa: no spring of this rope in either reading."""
+    mass, length = np.meshgrid(np.linspace(10, 100, 91), np.linspace(5.4, 8.4, 31))
+    printed = jaxcable.ParameterSurface(jaxcable.PIAO_TABLE3.coefficients, first="mass")
+    for surface, (low, high) in (
+        (jaxcable.PIAO_TABLE3, (3.722e12, 6.061e14)),
+        (printed, (1.320e12, 5.420e12)),
+    ):
+        values = np.asarray(surface(mass, length))
+        np.testing.assert_allclose([values.min(), values.max()], [low, high], rtol=1e-3)
+        assert values.min() > 10 * 120e9
+    # The default E_L1 (65 kg, 7.4 m) is about 2000 x the fibre modulus.
+    default = float(jaxcable.PIAO_TABLE3(65.0, 7.4))
+    assert default / 120e9 > 1800 and default / 100e9 < 2200
+
+
 def test_surface_polynomial_order():
     c = np.arange(1.0, 10.0)
     m, ln = 3.0, 5.0

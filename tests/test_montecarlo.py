@@ -2,6 +2,7 @@
 distributions, input errors, and sharding over 4 CPU devices (in a subprocess)."""
 
 import json
+import math
 import os
 import pathlib
 import subprocess
@@ -29,7 +30,13 @@ FORCE = np.stack(
     [60 + 40 * np.sin(TIME / 900) ** 2, 30 + 50 * np.sin(TIME / 1500) ** 2]
 )
 LOADS = jc.ForceHistory(TIME, FORCE)
-CABLES = jc.Cable(length=jnp.array([3.0, 5.0]), speed=3e-3 / 60)
+# No breaking strain: these parameters creep the cables far beyond a real rope's over
+# 2 h, and these tests are about the statistics (tests/test_breaking_strain.py counts
+# the draws that break).
+UNBREAKABLE = math.inf
+CABLES = jc.Cable(
+    length=jnp.array([3.0, 5.0]), speed=3e-3 / 60, breaking_strain=UNBREAKABLE
+)
 NUM_DRAWS = 20  # not a multiple of the chunk: the last chunk is padded
 CHUNK = 8
 
@@ -70,7 +77,11 @@ def _reference(parameters, cables, loads, key, num_draws):
     for i in range(num_draws):
         model = parameters.draw(jax.random.fold_in(key, i))
         for j in range(len(cables.length)):
-            cable = jc.Cable(length=cables.length[j], speed=speeds[j])
+            cable = jc.Cable(
+                length=cables.length[j],
+                speed=speeds[j],
+                breaking_strain=UNBREAKABLE,
+            )
             traj = jc.simulate_force_history(
                 model, cable, loads.time[j], loads.force[j], throw=False
             )
@@ -129,7 +140,11 @@ def test_failed_draws_are_counted_and_excluded():
     # Park Eq. 8: t_r2 = lambda1 (L0/v)^2 - lambda2 must be > 0. For the fast, short
     # cable (L0/v = 300 s) lambda1 (L0/v)^2 = 702 s, so about half of the draws of
     # lambda2 ~ U(0, 1400) s fail for it; the slow cable never fails.
-    cables = jc.Cable(length=jnp.array([3.0, 0.3]), speed=jnp.array([5e-5, 1e-3]))
+    cables = jc.Cable(
+        length=jnp.array([3.0, 0.3]),
+        speed=jnp.array([5e-5, 1e-3]),
+        breaking_strain=UNBREAKABLE,
+    )
     key = jax.random.key(3)
     sampler = _sampler(lambda2=(0.0, 1400.0))
     res = _run(parameters=sampler, cables=cables, key=key)
@@ -158,7 +173,11 @@ def test_rate_test_with_correlated_parameters():
     corr = np.array([[1.0, 0.5, 0.0], [0.5, 1.0, -0.3], [0.0, -0.3, 1.0]])
     sampler = jc.CorrelatedParameters.from_correlation(MODEL, names, std, corr)
     protocol = jc.Protocol.cycles(100.0, 1, samples_per_ramp=8)
-    cables = jc.Cable(length=jnp.array([0.3, 0.5]), speed=jnp.array([5e-5, 1e-4]))
+    cables = jc.Cable(
+        length=jnp.array([0.3, 0.5]),
+        speed=jnp.array([5e-5, 1e-4]),
+        breaking_strain=UNBREAKABLE,
+    )
     key = jax.random.key(7)
     res = jc.monte_carlo(
         sampler, cables, protocol, key=key, num_draws=6, chunk_size=4,
@@ -169,7 +188,11 @@ def test_rate_test_with_correlated_parameters():
     for i in range(6):
         model = sampler.draw(jax.random.fold_in(key, i))
         for j in range(2):
-            cable = jc.Cable(length=cables.length[j], speed=cables.speed[j])
+            cable = jc.Cable(
+                length=cables.length[j],
+                speed=cables.speed[j],
+                breaking_strain=UNBREAKABLE,
+            )
             traj = jc.simulate_rate_test(model, cable, protocol)
             elong[i, j], times[i, j] = traj.elongation, traj.time
     np.testing.assert_allclose(res.elongation, elong, rtol=1e-10, atol=1e-15)

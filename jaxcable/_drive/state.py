@@ -178,9 +178,8 @@ def broken_result(
     strain is above the cable's `breaking_strain` (`Cable.breaking_strain`)."""
     # The sample's own cause comes first: a strain that is not finite, or beyond the
     # model's limit, has a message of its own (and a NaN compares False, so it would
-    # otherwise read as a break).
-    # In the strain's dtype: a float32 simulation of a cable whose other fields are
-    # float64 compares in float32.
+    # otherwise read as a break). The limit in the strain's dtype, so that a float32
+    # simulation of a cable built with float64 fields compares in float32.
     limit = jnp.asarray(breaking_strain, strain.dtype)
     ok = (strain <= limit) | (result != RESULTS.successful)
     return RESULTS.where(ok, result, RESULTS.strain_beyond_break)

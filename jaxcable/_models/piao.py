@@ -4,7 +4,8 @@ equation of the paper:
 - Eq. 1, one family (a spring and two Kelvin-Voigt elements) under a stress:
     [`family_step`][];
 - Eq. 2-3, unloading as the superposition of an added negative stress on the
-    unloading family: [`superposed_strain`][];
+    unloading family, which removes at most what the loading family added (never
+    shorter than new): [`superposed_strain`][];
 
 and Piao's Table 1 ([`PIAO_TABLE1`][]). The parameter surfaces (Eq. 5, Table 3) are in
 `piao_surface.py`.
@@ -156,12 +157,13 @@ def superposed_strain(
     scaled by s = min(1, added / removed), so the strain is
     max(added - removed, 0): a cable recovers at most the elongation it was given
     and never ends shorter than new. With equal L and UL sets and a non-negative
-    force, removed <= added (the linear solid's strain is >= 0) and s = 1: the
-    terms are returned unscaled, bit for bit. With distinct sets the bound is active
-    wherever the UL set would remove more than the L set added (a softer UL set
-    after a long enough rest; `docs/model_notes.md` point 10). s is continuous
-    (s * removed = min(removed, added)), so the strain stays continuous in the
-    force history.
+    force, removed <= added (the linear solid's strain is >= 0) and the unscaled
+    terms themselves are returned: the same operations as without the bound (the
+    compiled program may round 1-2 ulp differently where XLA fuses it otherwise;
+    measured in `docs/model_notes.md` point 10). With distinct sets the bound is
+    active wherever the UL set would remove more than the L set added (a softer UL
+    set after a long enough rest). s * removed = min(removed, added) is continuous,
+    so the strain stays continuous in the force history.
 
     **Arguments:**
 
@@ -183,9 +185,10 @@ def superposed_strain(
     added = spring_L + unbounded.creep
     removed = unbounded.recovery_short + unbounded.recovery_long - spring_UL
     excess = removed > added
-    # Double `where`: finite gradients where removed = 0 (then excess is False).
+    # The guarded denominator keeps values and gradients finite where removed = 0
+    # (excess is False there, and `share` unused).
     share = added / jnp.where(excess, removed, 1.0)
-    # Where the bound is inactive, the unbounded parts themselves (bit for bit).
+    # Where the bound is inactive, the unbounded parts themselves.
     return StrainParts(
         instantaneous=jnp.where(
             excess, spring_L + share * spring_UL, unbounded.instantaneous
@@ -256,13 +259,14 @@ class FiveElementModel(AbstractCableModel[FiveElementState]):
     added ([`superposed_strain`][]): its three terms are scaled by
     s = min(1, added / removed), so eps = max(added - removed, 0) >= 0 for any L and
     UL sets, and no history leaves the cable shorter than new. With equal sets and a
-    non-negative force s = 1 and the strain is bit for bit the unbounded linear
-    solid's (monotone in the load: adding a non-negative force to any history never
-    shortens the cable later). The bound acts on the strain only, not on the
-    states: while it is active the UL elements keep their excess recovery, which a
-    later reloading takes back first (a cable reloaded after a bounded rest lengthens
-    later than a new one; measured in `docs/model_notes.md` point 10). Capping the
-    states instead would lose the continuity bound below.
+    non-negative force the bound never acts and the model is the linear solid as
+    before, monotone in the load (adding a non-negative force to any history never
+    shortens the cable later); a negative force (a slack cable's load-cell noise)
+    no longer compresses it below its new length. The bound acts on the strain only,
+    not on the states: while it is active the UL elements keep their excess
+    recovery, which a later reloading takes back first (a cable reloaded after a
+    bounded rest lengthens later than a new one; measured in `docs/model_notes.md`
+    point 10). Capping the states instead would lose the continuity bound below.
 
     **Cycles below the previous maximum.** A reloading that stays below the largest
     stress so far raises sigma_UL back towards 0: it takes the recovery back with the
@@ -288,13 +292,13 @@ class FiveElementModel(AbstractCableModel[FiveElementState]):
 
     **Default parameters.** Loading: Piao Table 1 ([`jaxcable.PIAO_TABLE1`][]),
     E_L2 = 9.5e9 Pa, E_L3 = 5.0e10 Pa, eta_L2 = 1.0e10 Pa s (tau_2 ~ 1.05 s),
-    eta_L3 = 1.0e13 Pa s (tau_3 = 200 s). E_L1 is
-    a function of payload and cable length in the paper (Table 3); the default
-    2.2e14 Pa is the Table 3 surface at the robot's maximum payload 65 kg on a 7.4 m
-    cable, read as described in [`jaxcable.PIAO_TABLE3`][]: Table 3's parameter and
-    unit did not survive, and this value, about 2000 times the UHMWPE fibre modulus,
-    is not a measured spring. It makes the spring practically rigid (strain < 1e-6 at
-    the paper's loads): the elongation is carried by the two Kelvin-Voigt elements. The unloading table
+    eta_L3 = 1.0e13 Pa s (tau_3 = 200 s). E_L1 is a function of payload and cable
+    length in the paper (Table 3); the default 2.2e14 Pa is the Table 3 surface at
+    the robot's maximum payload 65 kg on a 7.4 m cable, read as described in
+    [`jaxcable.PIAO_TABLE3`][]: Table 3's parameter and unit did not survive, and
+    this value, about 2000 times the UHMWPE fibre modulus, is not a measured spring.
+    It makes the spring practically rigid (strain < 1e-6 at the paper's loads): the
+    elongation is carried by the two Kelvin-Voigt elements. The unloading table
     (Table 2) is lost, so **the unloading parameters default to the loading ones**
     (E_UL1 = E_L1, E_UL2 = E_L2, ...): the default model is the linear five-element
     solid, which recovers fully after unloading.

@@ -1,6 +1,7 @@
 """Piao et al.'s parameter surfaces: a model parameter as a cubic polynomial of payload
 and cable length (Eq. 5, [`ParameterSurface`][]), the printed coefficients (Table 3,
-[`PIAO_TABLE3`][]) and the five-element model they give ([`piao_five_element`][])."""
+whose parameter and unit did not survive, read as E_L1 in Pa: [`PIAO_TABLE3`][]) and
+the five-element model they give ([`piao_five_element`][])."""
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -91,27 +92,39 @@ _TABLE3 = np.array(
 )
 
 PIAO_TABLE3 = ParameterSurface(_TABLE3, first="length")
-"""Piao Table 3 read as the loading spring modulus E_L1(m, l), Pa (illustrative preset).
+"""Piao Table 3, coefficients of unknown identity, read as the loading spring modulus
+E_L1(m, l) in Pa (an illustrative preset, not a measured spring).
 
-Table 3 prints nine coefficients, in the order p00, p10, p01, p20, p11, p02, p30, p21,
-p12, without units or the parameter they belong to. Evaluated as printed (x = mass in
-kg, y = length in m) the surface *rises* with cable length over most of the tested
-range, against the text
-("E_L1 increases with high payload and short cable length", Section 3.3 and 4). With
-the variables swapped, `first="length"` (x = length, y = mass), it rises with payload
-and falls with length over the experiments' range (payloads up to about 100 kg,
-lengths 5.4-8.4 m; tested for 10-110 kg, and the rise holds from about 4 kg), so this
-is the reading chosen.
+**What survives.** Table 3 prints nine coefficients, in the order p00, p10, p01, p20,
+p11, p02, p30, p21, p12, without a unit and without the parameter they belong to: Eq. 5
+lists P = E_L1, E_UL1, E_UL3 or eta_UL3 "and all values are listed in Table 3", but
+only one set of nine survives.
 
-Scaling: the values are taken as printed, in Pa (Table 1 gives E_L1's unit as N/m^2,
-the same as the fitted E_L2, E_L3). They span about 4e12 Pa (10 kg) to 6e14 Pa
-(100 kg), far above any fibre modulus (UHMWPE ~1e11 Pa): the spring is practically
-rigid and the elongation Piao fitted is carried by the Kelvin-Voigt elements. No
-rescaling is applied on purpose: the surface grows about as m^2, so any factor making
-the spring compliant would make the instantaneous elongation *fall* with payload
-(sigma / E_L1 ~ 1/m); taken as printed that term stays below 1e-6 strain on the
-paper's 6 mm rope and the model's elongation rises with payload. A different scale is
-a one-liner: `ParameterSurface(PIAO_TABLE3.coefficients * s, first="length")`.
+**The reading chosen.** E_L1, in Pa (the unit Table 1 gives E_L1), with the variables
+swapped, `first="length"` (x = length in m, y = mass in kg). The text says E_L1
+"increases with high payload and short cable length" (Sections 3.3 and 4). Evaluated
+as printed (x = mass in kg) the surface *rises* with cable length over most of the
+tested range; swapped, it rises with payload and falls with length over the
+experiments' range (payloads up to about 100 kg, lengths 5.4-8.4 m; tested for
+10-110 kg, and the rise holds from about 4 kg).
+
+**Magnitudes.** Over 10-100 kg and 5.4-8.4 m this reading spans 3.7e12 Pa (10 kg,
+8.4 m) to 6.1e14 Pa (100 kg, 5.4 m), 31-37 to 5,000-6,100 times the UHMWPE fibre
+modulus (100-120 GPa), which no rope made of the fibre can exceed; at 65 kg on 7.4 m
+(the default E_L1, 2.2e14 Pa) it is about 2,000 times. As printed it spans 1.3e12 to
+5.4e12 Pa, 11-54 times. Either way it is not the spring of this rope: taken as printed
+the spring is practically rigid (strain below 1e-6 on the paper's 6 mm rope) and the
+elongation is carried by the Kelvin-Voigt elements. The values are of the order of
+Table 1's eta_L3 = 1e13 Pa s, so they may be eta_UL3's (Pa s; the text gives it the
+same trend as E_L1), which the trend cannot tell apart.
+
+No rescaling is applied on purpose: the surface grows about as m^2, so any factor
+making the spring compliant would make the instantaneous elongation *fall* with
+payload (sigma / E_L1 ~ 1/m); taken as printed the model's elongation rises with
+payload. A different scale is a one-liner:
+`ParameterSurface(PIAO_TABLE3.coefficients * s, first="length")`.
+`docs/model_notes.md` point 12 records the reading; `tests/test_five_element.py`
+checks the trend and the span of both variable orders.
 """
 
 
@@ -123,8 +136,10 @@ def piao_five_element(
 ) -> FiveElementModel:
     """The five-element model of Piao et al. for a payload and a cable length.
 
-    E_L1 = `surface(mass_kg, length_m)` (Piao Table 3, read as in
-    [`jaxcable.PIAO_TABLE3`][]); E_L2, E_L3, eta_L2, eta_L3 from Table 1. The unloading
+    E_L1 = `surface(mass_kg, length_m)` (Piao Table 3, coefficients of unknown
+    identity read as E_L1 in Pa, 31-6,100 times the UHMWPE fibre modulus over the
+    paper's range: see [`jaxcable.PIAO_TABLE3`][]); E_L2, E_L3, eta_L2, eta_L3 from
+    Table 1. The unloading
     parameters (Table 2 and their surfaces) are lost: E_UL1 follows the same surface
     (the paper: "E_UL1 ... has the similar trend with E_L1") and E_UL2, E_UL3, eta_UL2,
     eta_UL3 equal the loading values, so the preset is the linear five-element solid
