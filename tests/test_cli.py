@@ -788,7 +788,7 @@ def test_demo_fit_report(demo_run):
     assert result.converged
     assert np.all(result.rmse_mm < 0.05), result.rmse_mm
     # Says what was left out of the fit.
-    assert "fitted 3 of 12 parameters" in stdout and "lambda2" in stdout
+    assert "fitted 3 of 14 parameters" in stdout and "lambda2" in stdout
 
 
 @pytest.mark.slow

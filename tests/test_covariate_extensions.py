@@ -33,7 +33,14 @@ def _raw(seeds=(0, 1, 2)):
                 force=force,
                 elongation=np.zeros_like(time),
                 extra={"humidity": humidity},
-                metadata={"length_mm": LENGTH_MM, "control": "force", "id": f"t{s}"},
+                # No breaking strain: the shifted time of the gradient test's target
+                # creeps this dashpot past the rope's.
+                metadata={
+                    "length_mm": LENGTH_MM,
+                    "control": "force",
+                    "id": f"t{s}",
+                    "breaking_strain": float("inf"),
+                },
             )
         )
     return out

@@ -5,6 +5,7 @@ docs/diagnosis.md)."""
 
 import dataclasses
 import json
+import math
 
 import numpy as np
 import pytest
@@ -201,8 +202,14 @@ def test_other_base_models_refit_all_their_parameters(clean_tests):
     # With no DEFAULT_FIT entry every base parameter is fitted, in the base and in
     # the candidates (never an extension's fixed fields); hereditary needs an
     # IntegratedModel inside and says so.
+    # Burgers' default start creeps past the default 7 % breaking strain over these
+    # holds: a start value, not a cable, so these cables are given none.
+    unbreakable = [
+        dataclasses.replace(t, metadata={**t.metadata, "breaking_strain": math.inf})
+        for t in clean_tests[:3]
+    ]
     d = jc.diagnose(
-        clean_tests[:3],
+        unbreakable,
         jc.BurgersModel(),
         candidates=["hereditary", "termination_compliance"],
     )

@@ -211,7 +211,9 @@ def test_temperature_reduced_time_and_hotter_creeps_faster():
     creep = {}
     for T in (273.15, 293.15, 313.15):
         traj = _simulate(model, jc.Cable(length=0.3, temperature=T))
-        creep[T] = float(traj.elongation[30] - traj.elongation[20])  # over the hold
+        # Creep accrued by the end of the 100 s ramp (the delayed-elastic elements
+        # of the base saturate within seconds of the hold).
+        creep[T] = float(traj.parts.creep[20])
     assert creep[273.15] < creep[293.15] < creep[313.15]
     # time-temperature superposition: at T the model is the base on t / a_T
     T = 313.15
@@ -228,30 +230,26 @@ def test_temperature_reduced_time_and_hotter_creeps_faster():
 
 
 def test_hereditary_ramp_matches_exact_superposition():
-    # docs/model_notes.md, point 4: under F = F0 + k t (F0 applied at t = 0) the Kelvin-Voigt
-    # term is exactly [F0 (1 - e) + k (t - t_c (1 - e))] / (E2c A), e = exp(-t / t_c),
-    # when w = 1. F0 = 1 N is above the 0.2 N where the tension clock ramps in
-    # (`jaxcable._models.kernels.tension_time_step`), so the clock is the real time (from 0 N a
-    # ramp would count its first F_on / k seconds in part).
+    # docs/model_notes.md, point 4: under F = F0 + k t (F0 applied at t = 0) the exact
+    # Kelvin-Voigt creep of (E2c, t_c) is [F0 (1 - e) + k (t - t_c (1 - e))] / (E2c A),
+    # e = exp(-t / t_c), and Park's equivalent-force reading of it is
+    # (I / t)(1 - e) / (E2c A); the extension adds w times their difference. F0 = 1 N
+    # is above the 0.2 N where the tension clock ramps in
+    # (`jaxcable._models.kernels.tension_time_step`), so the clock is the real time.
     k, f0 = 0.5, 1.0  # N/s, N
     time = jnp.linspace(0.0, 200.0, TIME.shape[0])
     force = f0 + k * time
     ext = _simulate(Hereditary(BASE, weight=1.0), CABLE, time, force)
+    base = _simulate(BASE, CABLE, time, force)
     area = CABLE.area
     t = np.asarray(time)
     impulse = f0 * t + 0.5 * k * t**2
-    dashpot = impulse / (float(BASE.eta0) * area)
-    kelvin_voigt = np.asarray(ext.parts.creep) - dashpot
     t_c, E2c = float(BASE.t_c), float(BASE.E2c)
     relaxed = -np.expm1(-t / t_c)
     exact = (f0 * relaxed + k * (t - t_c * relaxed)) / (E2c * area)
-    np.testing.assert_allclose(kelvin_voigt[1:], exact[1:], rtol=1e-9)
-    # and the base's equivalent-force term is (I / t)(1 - exp(-t / t_c)) / (E2c A)
-    base = _simulate(BASE, CABLE, time, force)
     equivalent = impulse[1:] / t[1:] * relaxed[1:] / (E2c * area)
-    np.testing.assert_allclose(
-        np.asarray(base.parts.creep)[1:] - dashpot[1:], equivalent, rtol=1e-9
-    )
+    added = np.asarray(ext.parts.creep - base.parts.creep)
+    np.testing.assert_allclose(added[1:], exact[1:] - equivalent, rtol=1e-9)
 
 
 def test_hereditary_runs_on_the_base_clock():
@@ -281,12 +279,12 @@ def test_stress_nonlinear_creep_power_law():
     n = 0.7
     model = StressNonlinearCreep(BASE, n=n)
     gain = (200.0 / CABLE.area / float(model.stress_ref)) ** n
-    # at sigma_ref (100 N) the base; a force step to 200 N within 1 ms leaves the
+    # at sigma_ref (100 N) the base; a force step to 200 N within 1 us leaves the
     # extra creep (a state variable) unchanged; from then on the base's creep
     # increments are scaled by (sigma / sigma_ref)^n
     time = np.linspace(0.0, 600.0, TIME.shape[0])
     step = 40
-    time[step] = time[step - 1] + 1e-3
+    time[step] = time[step - 1] + 1e-6
     force = np.where(np.arange(time.size) < step, 100.0, 200.0)
     ext = _simulate(model, CABLE, jnp.asarray(time), jnp.asarray(force))
     ref = _simulate(BASE, CABLE, jnp.asarray(time), jnp.asarray(force))

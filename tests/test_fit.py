@@ -126,12 +126,15 @@ _CASES = {
         ("E", "sigma_y", "z_y", "gamma"),
         (0.7, 1.4, 0.75, 0.5),
     ),
-    # Six of twelve: loading, creep and short-term recovery; the long-term recovery
-    # (t_r2 ~ 3 days) needs rests of days.
+    # Three of fourteen, the spring fixed: the creep that recovers within the 30 min
+    # rest (E2r), the creep that stays (E3r) and their creep time (t_e). On 60 s
+    # ramps the spring and the elements of a second (E2c, t_c = 0.9 s) are one
+    # compliance, the long-term recovery (t_r2 ~ a day) needs rests of days, the flow
+    # tests of months.
     "integrated": (
         jc.IntegratedModel(),
-        ("E1c", "E2c", "t_c", "eta0", "E2r", "t_r1"),
-        (1.4, 0.7, 1.5, 0.6, 1.3, 0.7),
+        ("E2r", "E3r", "t_e"),
+        (1.4, 0.7, 1.5),
     ),
 }
 
@@ -255,31 +258,35 @@ def test_json_per_test_round_trip():
 
 
 @pytest.mark.slow
-def test_warns_on_long_term_recovery_without_rest():
-    """Park's long-term recovery (E3r, t_r2 = lambda1 (L0/v)^2 - lambda2 ~ 3 days)
-    from tests that end at the unloading: only E3r t_r2 shows, ~1e-6 m, below the
-    noise. Both must be flagged; the well-determined moduli must not."""
+def test_warns_on_flow_from_tests_of_minutes():
+    """The integrated model's flow (eta0: 1e-9 /s at 100 N) from tests that last
+    minutes: it moves the elongation by nanometres, far below the noise. It must be
+    flagged; the well-determined moduli must not."""
     true = jc.IntegratedModel()
     tests = _tests(true, designs=((0.3, 100.0, 0), (0.1, 150.0, 0)))
-    names = ("E1c", "E2c", "E3r", "lambda1")
+    names = ("E2r", "E3r", "eta0")
     with pytest.warns(jc.IdentifiabilityWarning) as caught:
         result = jc.fit(true, tests, fit=names, multistart=1, max_steps=16, throw=False)
     text = " ".join(str(w.message) for w in caught)
-    assert "E3r" in text and "lambda1" in text
-    assert "E1c" not in text and "E2c" not in text
+    assert "eta0" in text
+    assert "E2r" not in text and "E3r" not in text
     assert result.warnings == tuple(str(w.message) for w in caught)
-    i, j = result.names.index("E3r"), result.names.index("lambda1")
-    assert abs(result.correlation[i, j]) > 0.99
-    assert result.relative_error[i] > 1 and result.relative_error[j] > 1
+    assert result.relative_error[result.names.index("eta0")] > 1
     # The moduli the data do determine are still recovered.
+    keep = [result.names.index(n) for n in ("E2r", "E3r")]
     _assert_recovered(
-        dataclasses.replace(result, names=result.names[:2]),
-        {"E1c": float(true.E1c), "E2c": float(true.E2c)},
+        dataclasses.replace(
+            result,
+            names=tuple(result.names[i] for i in keep),
+            values=np.asarray(result.values)[keep],
+            stderr=np.asarray(result.stderr)[keep],
+        ),
+        {"E2r": float(true.E2r), "E3r": float(true.E3r)},
     )
-    # E3r and lambda1 drift along their valley, so the solver does not converge;
-    # with throw=True the error carries the diagnosis (same compiled kernel).
+    # eta0 drifts along its flat direction, so the solver does not converge; with
+    # throw=True the error carries the diagnosis (same compiled kernel).
     assert not result.converged
-    with pytest.raises(RuntimeError, match="E3r"):
+    with pytest.raises(RuntimeError, match="eta0"):
         jc.fit(true, tests, fit=names, multistart=1, max_steps=16)
 
 

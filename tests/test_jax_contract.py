@@ -207,7 +207,9 @@ def _elongation_loss(model):
 
 @pytest.mark.parametrize("loss", [_rate_loss, _force_loss, _elongation_loss])
 def test_grad_matches_finite_differences(loss):
-    model = jc.IntegratedModel()
+    # With hardening (beta > 0; the default has none), so that its gradient is checked
+    # too and a finite difference of beta stays in its domain.
+    model = jc.IntegratedModel(beta=0.05, gamma=2.0)
     # Jitted whole: eagerly, every one of the 24 finite-difference evaluations (and
     # the gradient) would trace the driver again; jitted, one compilation serves
     # them all. The functions differentiated are the same.

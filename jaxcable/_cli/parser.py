@@ -289,8 +289,9 @@ def build_parser() -> argparse.ArgumentParser:
     what.add_argument(
         "--fit",
         metavar="NAMES",
-        help="comma-separated parameters to fit (default: all); the others keep "
-        "their start values",
+        help="comma-separated parameters to fit (default: for the integrated model "
+        f"{','.join(PARK_IDENTIFIABLE)}; else all); the others keep their start "
+        "values",
     )
     what.add_argument(
         "--per-test",

@@ -247,7 +247,9 @@ def fit(
     - `tests`: a [`jaxcable.TestData`][] or a sequence of them, with elongation and
         `length_mm` metadata; an optional boolean `mask` attribute (True = fit the
         sample) excludes samples, e.g. slack, from the residual.
-    - `fit`: names of the parameters to fit; default all inexact array fields.
+    - `fit`: names of the parameters to fit; default the model's identifiable set
+        where the registry declares one (`IntegratedModel`: `PARK_IDENTIFIABLE`),
+        else all inexact array fields.
     - `per_test`: names of parameters fitted with one value per test (fitted whether
         or not they are in `fit`).
     - `transforms`: optional {name: `'log'` | `'linear'`} overriding the table above.

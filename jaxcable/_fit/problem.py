@@ -21,7 +21,7 @@ from .._drive import (
     init_state,
     step,
 )
-from .._models import AbstractCableModel, ParameterInfo
+from .._models import AbstractCableModel, ParameterInfo, identifiable
 from .._results import RESULTS
 from .data import PaddedTests, as_test_list, pad_tests, test_id
 from .parameters import (
@@ -409,7 +409,13 @@ def make_problem(
     declared = _checked_model(model, data, tests)
     available = list(declared)
     per = _names(model, available, "per_test", per_test)
-    chosen = _names(model, available, "fit", fit) if fit is not None else available
+    if fit is not None:
+        chosen = _names(model, available, "fit", fit)
+    else:
+        # The registry's default set where it declares one (the integrated model's
+        # parameters that tests of minutes identify; its hardening starts at 0, where
+        # a log scale cannot start), else every parameter.
+        chosen = [n for n in (identifiable(model) or available) if n in available]
     if fit is not None and not chosen and not per:
         raise ValueError("`fit` is empty: name at least one parameter to fit.")
     names = tuple(n for n in available if n in chosen or n in per)

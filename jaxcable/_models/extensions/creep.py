@@ -68,7 +68,8 @@ class HereditaryState(eqx.Module):
 
 
 class Hereditary(AbstractExtension[HereditaryState]):
-    r"""Exact Boltzmann superposition of the Kelvin-Voigt creep of Park's model.
+    r"""The difference between the exact (hereditary) Kelvin-Voigt creep of Park's
+    Eq. 3 and his equivalent-force reading of it (Eq. 5), added to the base.
 
     Park's Eq. 5 replaces the hereditary integral of the Kelvin-Voigt creep compliance
     J(t) = (1 - exp(-t / t_c)) / (E2c A) by the equivalent force F_eq = I / T:
@@ -86,8 +87,11 @@ class Hereditary(AbstractExtension[HereditaryState]):
 
         eps = eps_base + w (eps_ex - eps_eq)   (added to the creep part),
 
-    w = 0 is the base (the paper's model), w = 1 the fully hereditary Kelvin-Voigt
-    creep; w > 1 is accepted (a fit may overshoot) and extrapolates.
+    w = 0 is the base. The default [`jaxcable.IntegratedModel`][] already integrates
+    its delayed-elastic elements exactly (`docs/model_notes.md`, point 4), so around
+    it the term is an extra creep that keeps growing along long loadings, shaped as
+    that difference (Park's printed reading itself would be w = -1, outside the
+    domain); it stays a candidate of the diagnosis for data whose creep grows so.
 
     E2c and t_c are read from the innermost [`jaxcable.IntegratedModel`][] (following
     `.base`), so they are fitted with the base. The extension keeps its own I and T
