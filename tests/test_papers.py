@@ -44,6 +44,7 @@ def test_targets_are_sourced():
     assert len(set(names)) == len(names) == 11
     for target in papers.SK78_TARGETS:
         assert "Park" in target.source
+        assert "mm/min" in target.quantity  # the simulated test it is read from
         assert target.derived == target.name.startswith("peak_")
 
 

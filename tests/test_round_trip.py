@@ -2,7 +2,8 @@
 fitted with `jaxcable fit` from the true parameters, re-simulated with
 `jaxcable simulate --params PARAMS.json`.
 
-The fit must come down to the elongation noise (each test's RMSE <= 1.3 x 0.01 mm),
+The fit must come down to the noise (each test's RMSE <= 1.3 x the elongation noise and
+the force noise through the model's compliance, added in quadrature),
 and the re-simulation must reproduce the fit's residuals: `simulate` drives the model
 with the recorded forces exactly as `fit` does."""
 
@@ -109,7 +110,15 @@ def test_fit_and_simulate_round_trip(tmp_path, capsys, seed):
     # One truth: `simulate --params` reproduces the fit's residuals.
     for k, rmse in fit_rmse.items():
         assert simulate_rmse[k] == pytest.approx(rmse, rel=0.01), (k, report)
-    # The fit comes down to the elongation noise.
-    for k, rmse in fit_rmse.items():
-        assert rmse <= 1.3 * 1e3 * ELONGATION_NOISE, (k, report, fit_log)
+    # The fit comes down to the noise: the elongation's, and the force noise that
+    # drives the model, through its compliance (the delayed-elastic elements follow
+    # a force within seconds, about one sample of the hold).
+    model = jc.IntegratedModel()
+    for (length, peak), (k, rmse) in zip(TESTS, fit_rmse.items()):
+        area = float(jc.Cable(length * 1e-3).area)
+        compliance = length * sum(
+            1 / (float(getattr(model, e)) * area) for e in ("E1c", "E2c", "E2r", "E3r")
+        )  # mm/N
+        noise = math.hypot(1e3 * ELONGATION_NOISE, compliance * FORCE_NOISE * peak)
+        assert rmse <= 1.3 * noise, (k, noise, report, fit_log)
     assert status == 0 and document["converged"], fit_log

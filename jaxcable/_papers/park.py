@@ -91,12 +91,14 @@ class Target(NamedTuple):
 
     **Fields:**
 
-    - `name`: identifier, e.g. `"recovery_300mm_48h"`.
+    - `name`: identifier, e.g. `"second_test_300mm_48h"`.
     - `value`: the paper's value, in `unit`.
     - `unit`: `"mm"` or `"-"` (a ratio).
     - `source`: where it is printed (section, figure, table).
     - `derived`: True where the value is computed from printed numbers rather than
         printed itself.
+    - `quantity`: the simulated quantity compared with it: which test, simulated as
+        Park ran it, and what is read from it.
     """
 
     name: str
@@ -104,6 +106,7 @@ class Target(NamedTuple):
     unit: str
     source: str
     derived: bool = False
+    quantity: str = ""
 
 
 def _table3(length_mm: int, values: Sequence[float]) -> list[Target]:
@@ -116,6 +119,8 @@ def _table3(length_mm: int, values: Sequence[float]) -> list[Target]:
             "mm",
             f"Park Table 3, {length_mm} mm, measured: elongation of the second tensile "
             f"test to 100 N after 10 cycles (100 N, 3 mm/min) and {h} h of rest",
+            quantity=f"10 cycles 0 <-> 100 N at 3 mm/min, {h} h at 0 N, a second ramp "
+            "to 100 N: elongation at its peak minus elongation at the end of the rest",
         )
         for h, v in zip(REST_HOURS, values)
     ]
@@ -129,6 +134,8 @@ SK78_TARGETS: tuple[Target, ...] = (
         "-",
         "Park Sec. 4, on Fig. 3: creep = 4x static elongation at 3 mm/min (300 mm, "
         "0-100 N)",
+        quantity="first ramp 0 -> 100 N at 3 mm/min: creep / instantaneous strain "
+        "(Trajectory.parts) at 100 N",
     ),
     Target(
         "residual_300mm",
@@ -136,6 +143,8 @@ SK78_TARGETS: tuple[Target, ...] = (
         "mm",
         "Park Sec. 4, on Fig. 5: elongation at 0 N after the first unloading (300 mm, "
         "100 N, 3 mm/min)",
+        quantity="first cycle 0 -> 100 -> 0 N at 3 mm/min: elongation at 0 N at the "
+        "end of the unloading",
     ),
     Target(
         "residual_100mm",
@@ -143,6 +152,8 @@ SK78_TARGETS: tuple[Target, ...] = (
         "mm",
         "Park Sec. 4, on Fig. 5: elongation at 0 N after the first unloading (100 mm, "
         "100 N, 3 mm/min)",
+        quantity="first cycle 0 -> 100 -> 0 N at 3 mm/min: elongation at 0 N at the "
+        "end of the unloading",
     ),
     *_table3(100, (2.33, 2.33, 2.36)),
     *_table3(300, (5.05, 5.99, 7.12)),
@@ -153,6 +164,7 @@ SK78_TARGETS: tuple[Target, ...] = (
         "derived from Park Sec. 4 on Fig. 3: RMS error 0.20 mm = 3.5 % of the peak "
         "elongation (300 mm, 100 N, 50 mm/min)",
         derived=True,
+        quantity="first ramp 0 -> 100 N at 50 mm/min: elongation at 100 N",
     ),
     Target(
         "peak_300mm_3mm_min",
@@ -161,6 +173,7 @@ SK78_TARGETS: tuple[Target, ...] = (
         "derived from Park Sec. 4 on Fig. 3: RMS error 0.06 mm = 0.72 % of the peak "
         "elongation (300 mm, 100 N, 3 mm/min)",
         derived=True,
+        quantity="first ramp 0 -> 100 N at 3 mm/min: elongation at 100 N",
     ),
 )
 
@@ -174,7 +187,7 @@ class TargetRow(NamedTuple):
     - `paper`: the paper's value, in `unit`.
     - `model`: the model's value, in `unit`.
     - `error`: (model - paper) / paper, %.
-    - `unit`, `source`: as in the target.
+    - `unit`, `source`, `quantity`: as in the target.
     """
 
     name: str
@@ -183,6 +196,7 @@ class TargetRow(NamedTuple):
     error: float
     unit: str
     source: str
+    quantity: str
 
 
 def _stack(protocols: Sequence[Protocol]) -> Protocol:
@@ -340,6 +354,7 @@ def sk78_targets_report(
                 float(error),
                 target.unit,
                 target.source,
+                target.quantity,
             )
         )
     return rows

@@ -231,38 +231,47 @@ HIDDEN_EFFECT_DESIGN = (
 # extension's SIZE_FIELD in SIZE_UNIT; at or just above the detection limit measured by
 # `benchmarks/diagnose_matrix.py`), the weaker sizes of the sweep that found the limit,
 # the size of the one-seed tests of `make test` (about 3x the limit, where detection is
-# no coin toss) and the fixed values of the extension's other parameters.
+# no coin toss) and the fixed values of the extension's other parameters. Re-measured
+# for the delayed-elastic IntegratedModel (3 seeds per size, docs/diagnosis.md): its
+# creep saturates within seconds, so the effects that scale or shift that creep
+# (hereditary, stress_nonlinear_creep, temperature) need larger parameters than they
+# did on the linear dashpot for the same few um of elongation.
 HIDDEN_EFFECTS: dict[str, dict] = {
-    "hereditary": {"size": 0.01, "weaker": (0.005,), "test": 0.03, "fixed": {}},
+    "hereditary": {"size": 0.05, "weaker": (0.03,), "test": 0.15, "fixed": {}},
     "second_retardation": {
-        "size": 8e10,
-        "weaker": (1.5e11,),
-        "test": 2e10,
+        "size": 1.5e11,
+        "weaker": (3e11,),
+        "test": 5e10,
         "fixed": {"tau_k": 1800.0},
     },
     "stress_nonlinear_creep": {
-        "size": 1e-3,
-        "weaker": (3e-4, 1e-4),
-        "test": 3e-3,
+        "size": 3e-3,
+        "weaker": (1e-3,),
+        "test": 1e-2,
         "fixed": {},
     },
-    "temperature": {"size": 50.0, "weaker": (15.0, 5.0), "test": 150.0, "fixed": {}},
+    "temperature": {
+        "size": 2000.0,
+        "weaker": (1000.0, 500.0),
+        "test": 6000.0,
+        "fixed": {},
+    },
     "termination_compliance": {
-        "size": 5e-7,
-        "weaker": (4e-7,),
-        "test": 1.5e-6,
+        "size": 2.5e-7,
+        "weaker": (1.5e-7,),
+        "test": 7.5e-7,
         "fixed": {},
     },
     "bedding_in": {
-        "size": 5e-4,
-        "weaker": (3.5e-4,),
-        "test": 1.5e-3,
+        "size": 3.5e-4,
+        "weaker": (2e-4,),
+        "test": 1e-3,
         "fixed": {"F_b": 60.0},
     },
     "sensor_drift": {
-        "size": 1.2e-9,
-        "weaker": (9e-10,),
-        "test": 3.6e-9,
+        "size": 9e-10,
+        "weaker": (6e-10,),
+        "test": 2.7e-9,
         "fixed": {},
     },
 }
