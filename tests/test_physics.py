@@ -127,9 +127,7 @@ _SCALED = ("E1c", "E2c", "t_c", "E2r", "t_r1", "E3r", "t_e", "eta0", "sigma_a")
     dts=steps,
     force=levels,
     pulse=pulses,
-    scales=st.lists(
-        st.floats(-1.0, 1.0), min_size=len(_SCALED), max_size=len(_SCALED)
-    ),
+    scales=st.lists(st.floats(-1.0, 1.0), min_size=len(_SCALED), max_size=len(_SCALED)),
     stiffer=st.floats(0.0, 1.0),
 )
 def test_monotone_whatever_the_parameters(dts, force, pulse, scales, stiffer):

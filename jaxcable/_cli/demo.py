@@ -257,8 +257,8 @@ def _print_fit(args, result, num_tests: int, source: str, notes: list[str]) -> N
 def _fit(args, out: pathlib.Path, files: list, source: str, progress: bool):
     """Step 2: the integrated model fitted to the data set, with its report."""
     model = IntegratedModel()
-    # By default the identifiable Park parameters; the other four keep their defaults:
-    # with all twelve free the fit does not converge within the demo's time.
+    # By default the identifiable Park parameters; the others keep their defaults:
+    # with all fourteen free the fit does not converge within the demo's time.
     names = (
         names_option(args.fit, "--fit", model, "integrated")
         if args.fit
@@ -292,7 +292,7 @@ def _fit(args, out: pathlib.Path, files: list, source: str, progress: bool):
         notes.append(
             f"fitted {len(names)} of {len(all_names)} parameters; "
             f"{', '.join(fixed)} kept at the defaults of IntegratedModel() "
-            "(with all twelve free the fit does not converge within the demo's time)"
+            "(with all fourteen free the fit does not converge within the demo's time)"
         )
     if args.every > 1:
         notes.append(f"1 sample in {args.every} fitted (--every)")

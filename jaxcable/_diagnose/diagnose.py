@@ -248,7 +248,7 @@ def diagnose(
     - `model`: the base model and its start values (default
         [`jaxcable.IntegratedModel`][] with its defaults).
     - `fit_names`: the base parameters to fit (default: the model's identifiable
-        parameters in the model registry, for the integrated model Park's eight of
+        parameters in the model registry, for the integrated model Park's six of
         `PARK_IDENTIFIABLE`; else all).
     - `candidates`: extension ids to try (default: all of [`jaxcable.EXTENSIONS`][]
         and of [`jaxcable.COVARIATE_EXTENSIONS`][]; the latter are tried for each

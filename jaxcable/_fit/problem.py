@@ -409,13 +409,9 @@ def make_problem(
     declared = _checked_model(model, data, tests)
     available = list(declared)
     per = _names(model, available, "per_test", per_test)
-    if fit is not None:
-        chosen = _names(model, available, "fit", fit)
-    else:
-        # The registry's default set where it declares one (the integrated model's
-        # parameters that tests of minutes identify; its hardening starts at 0, where
-        # a log scale cannot start), else every parameter.
-        chosen = [n for n in (identifiable(model) or available) if n in available]
+    # By default the registry's identifiable set where it declares one, else all.
+    default = [n for n in (identifiable(model) or available) if n in available]
+    chosen = default if fit is None else _names(model, available, "fit", fit)
     if fit is not None and not chosen and not per:
         raise ValueError("`fit` is empty: name at least one parameter to fit.")
     names = tuple(n for n in available if n in chosen or n in per)

@@ -303,7 +303,7 @@ def hidden_effect_model(
     spread: float = 0.1,
 ) -> AbstractCableModel:
     """The true model of a hidden-effect data set: the default
-    [`jaxcable.IntegratedModel`][] with its eight fitted parameters perturbed
+    [`jaxcable.IntegratedModel`][] with its six fitted parameters perturbed
     (log-normal, standard deviation `spread`, from `seed`), wrapped in the extension
     `effect` of the given `size` (its `SIZE_FIELD`; default `HIDDEN_EFFECTS`), or
     unwrapped for `effect=None`."""
