@@ -82,7 +82,7 @@ class IndependentParameters(AbstractParameterSampler):
     - `model`: any [`jaxcable.AbstractCableModel`][] (the values of the parameters
         that are not drawn).
     - `distributions`: `{parameter name: distribution}`, e.g.
-        `{"E2c": jc.LogNormal(3.7e8, 0.1), "t_c": jc.Uniform(80.0, 120.0)}`
+        `{"E3r": jc.LogNormal(8e8, 0.1), "t_e": jc.Uniform(3.0, 6.0)}`
         ([`jaxcable.Normal`][], [`jaxcable.LogNormal`][], [`jaxcable.Uniform`][] or any
         [`jaxcable.AbstractDistribution`][]), in the parameters' SI units.
 
