@@ -245,9 +245,9 @@ HIDDEN_EFFECTS: dict[str, dict] = {
         "fixed": {"tau_k": 1800.0},
     },
     "stress_nonlinear_creep": {
-        "size": 3e-3,
-        "weaker": (1e-3,),
-        "test": 1e-2,
+        "size": 5e-3,
+        "weaker": (3e-3, 1e-3),
+        "test": 1.5e-2,
         "fixed": {},
     },
     "temperature": {
