@@ -6,7 +6,7 @@ arithmetic, and `jit` compiles a weakly typed argument into a different program
 (with other converts) than a strongly typed one of the same dtype. A model built from
 Python numbers (the defaults) would then compile every kernel once, and the same
 model with fitted values (strongly typed arrays) once again: measured on the
-diagnosis's held-out simulation, two programs where one serves (issue 14).
+diagnosis's held-out simulation, two programs where one serves.
 `field_array` gives every field a definite dtype, so that both share one program.
 """
 

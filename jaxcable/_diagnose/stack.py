@@ -1,5 +1,5 @@
 """The base model and every candidate of a diagnosis as one model, so that one
-compiled kernel fits them all (issue 14).
+compiled kernel fits them all.
 
 The candidate extensions are nested around the base in [`jaxcable.EXTENSIONS`][]'s
 order (creep changes innermost, then temperature, then the apparatus), each at the

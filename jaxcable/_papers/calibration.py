@@ -25,6 +25,7 @@ parameterisation above (log space inside a smooth box) and the residuals
 (minimax-like target errors, hinge residuals of the qualitative checks, a weak prior).
 """
 
+import dataclasses
 from typing import NamedTuple
 
 import equinox as eqx
@@ -84,22 +85,7 @@ _FIT_NAMES = (
     "t_gap",
 )
 # Every parameter of the model: the fitted model is rebuilt from them as floats.
-_FIELDS = (
-    "E1c",
-    "beta",
-    "gamma",
-    "E1r",
-    "E2c",
-    "t_c",
-    "eta0",
-    "E2r",
-    "t_r1",
-    "E3r",
-    "lambda1",
-    "lambda2",
-    "t_e",
-    "sigma_a",
-)
+_FIELDS = tuple(f.name for f in dataclasses.fields(IntegratedModel))
 # Bounds of the fitted variables (SI). Wide, except where a parameter would leave its
 # role: E1c * A must exceed the breaking load; t_r1 is the *short*-term recovery
 # (seen along one unloading, Park Fig. 8).
