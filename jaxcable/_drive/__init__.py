@@ -34,3 +34,12 @@ from .state import (
     Trajectory as Trajectory,
     init_state as init_state,
 )
+from .driven import (
+    ELONGATION_DRIVEN as ELONGATION_DRIVEN,
+    FORCE_DRIVEN as FORCE_DRIVEN,
+    TEST_DRIVES as TEST_DRIVES,
+    AbstractTestDrive as AbstractTestDrive,
+    ElongationDriven as ElongationDriven,
+    ForceDriven as ForceDriven,
+    as_test_drive as as_test_drive,
+)
