@@ -10,28 +10,10 @@ Timings: `jax.jit` of the step with the state, time and forces as arguments, war
 calls, then the median (and 10th/90th percentiles) over `--repeats` calls, each ended
 by `jax.block_until_ready`. Prints one JSON object and a table.
 
-Typical output (2-core CPU shared with other work, load average ~3.5, float64,
-jax 0.10.2; `--x64 --repeats 3000`):
-
-    model                                  throw  median_us   p10_us   p90_us  rate_kHz
-    integrated                             True        43.3     41.7     46.8      23.1
-    integrated                             False       96.0     92.5    115.0      10.4
-    five-element (Piao, live)              True        39.5     38.2     42.0      25.3
-    five-element (Piao, live)              False       91.7     84.8    115.7      10.9
-    Hooke                                  True        30.3     28.6     32.9      33.0
-    Hooke                                  False       25.0     24.0     29.1      40.0
-    integrated + termination, per cable    True        44.6     43.1     47.5      22.4
-    integrated + termination, per cable    False       97.9     94.3    116.2      10.2
-
-    closed loop, one sample inside the scan (1801 samples):
-      none                                     57.9 us
-      Hooke                                    56.7 us
-      five-element (Piao, live)                58.9 us
-      integrated                               62.0 us
-
-With `--sync` (no asynchronous dispatch) every step is 28-46 us, `throw=False`
-included: with asynchronous dispatch a step is sometimes run on another thread, and
-the hand-off costs ~50 us on a busy machine.
+Results with machine details: benchmarks/README.md. With `--sync` (no asynchronous
+dispatch) every step runs on the calling thread: with asynchronous dispatch a step is
+sometimes handed to another thread, and on a busy machine the hand-off costs more
+than the step.
 """
 
 import argparse

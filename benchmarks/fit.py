@@ -36,9 +36,9 @@ the timing), with the same jitted forward simulation of all tests. Rows:
 on `realistic` scipy's trf stops at another stationary point (a higher loss).
 
 OpenBLAS runs single-threaded (`OPENBLAS_NUM_THREADS=1` unless set): with its
-threads on a busy 2-core machine, each LAPACK call on the tall Jacobian (scipy's trf
-takes an SVD per step) took ~0.1 s instead of ~0.3 ms, which measured the machine,
-not the methods. Timings: jit and warm up, then the median of `--repeats` runs, each
+threads on a busy machine, each LAPACK call on the tall Jacobian (scipy's trf takes
+an SVD per step) can wait for a core far longer than it computes, which measures the
+machine, not the methods. Timings: jit and warm up, then the median of `--repeats` runs, each
 ended by `jax.block_until_ready`; the first call's extra time is reported as compile
 time. float64. Prints one JSON object and a table; results with machine details are
 kept in benchmarks/README.md.

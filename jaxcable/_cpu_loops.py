@@ -6,10 +6,9 @@ every iteration, at roughly 50 ns each. A rate-driven sample of jaxcable's kerne
 about 100 of them (the model's step, Newton's method and its loops), so one cable's
 simulation is that dispatch, not arithmetic. XLA can instead compile a while loop
 whose buffers are small into one kernel (`xla_cpu_small_while_loop_byte_threshold`,
-1024 bytes by default): the whole scan of one cable then runs as compiled code.
-Measured on a 2-core CPU (`benchmarks/kernel.py`, benchmarks/README.md): one cable
-x 2000 rate-driven samples 10.6 ms -> 0.7 ms, its gradient 25.6 ms -> 1.3 ms, and
-both compile faster.
+1024 bytes by default): the whole scan of one cable then runs as compiled code,
+an order of magnitude faster for one cable, and it compiles faster too
+(`benchmarks/kernel.py --loop-kernels`; results in benchmarks/README.md).
 
 The option is an XLA flag (`XLA_FLAGS`), read once, when JAX starts its CPU backend
 (the first computation of a process); it cannot be scoped to one program. So the
@@ -26,11 +25,12 @@ _OPTION = "xla_cpu_small_while_loop_byte_threshold"
 _EXTRA = "--xla_backend_extra_options="
 # 16 MiB: the scan of one cable (its stacked outputs are the loop's largest
 # buffers: 2000 samples take about 0.1 MB), and the Newton loops of a batch of
-# 1024 cables, which need between 2 and 4 MB (measured: at 2 MB a 1024-cable
-# forward kept its 85-108 ms, at 4 MB 65 ms, at 16 MB 58-67 ms). At 16 MB the whole
-# scan of those 1024 cables (benchmarks/kernel.py's forward, and its gradient's two
-# scans) is one single-threaded kernel as well, which was faster than XLA's spreading
-# of each small kernel over the cores, on 2 and on 16 cores (benchmarks/README.md).
+# 1024 cables, which need between 2 and 4 MB (below that a 1024-cable forward
+# keeps its speed). At 16 MB the whole scan of those 1024 cables
+# (benchmarks/kernel.py's forward, and its gradient's two scans) is one
+# single-threaded kernel as well, which was faster than XLA's spreading of each
+# small kernel over the cores, on 2 and on 16 cores (thresholds and timings:
+# benchmarks/README.md).
 DEFAULT_LOOP_KERNEL_BYTES = 1 << 24
 # The command line's switch to leave XLA's default.
 NO_LOOP_KERNELS_ENV = "JAXCABLE_NO_LOOP_KERNELS"

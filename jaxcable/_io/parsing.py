@@ -5,6 +5,7 @@ SI (the lines come from `text.py`). Every error names the file, line and column.
 
 import csv
 import math
+from collections.abc import Callable, Sequence
 from typing import NamedTuple
 
 import numpy as np
@@ -102,6 +103,57 @@ class ColumnMap(NamedTuple):
     position: int | None = None  # 1-based, shown in error messages when set
 
 
+def map_names(
+    names: Sequence[str],
+    *,
+    unknown: Callable[[int, str], ColumnMap],
+    repeated: Callable[[str, str, str], str],
+    missing: Callable[[str], str],
+    required: tuple[str, ...] = ("time", "force"),
+    check: Callable[[int, str], None] | None = None,
+    positions: bool = True,
+) -> list[ColumnMap]:
+    """Map column names to canonical quantities and unit factors by `COLUMNS`: the
+    one mapping behind a file's header and a `columns` value.
+
+    **Arguments:**
+
+    - `names`: the column names, in file order.
+    - `unknown`: `unknown(position, name)` is the `ColumnMap` of a name that is not
+        in `COLUMNS` (it may raise instead).
+    - `repeated`: `repeated(name, quantity, first)`, the error message for a second
+        column of `quantity` (`first`: the name of the first).
+    - `missing`: `missing(quantity)`, the error message for the first `required`
+        quantity that no column reads.
+    - `required`: the quantities that must have a column.
+    - `check`: called as `check(position, name)` before a name is mapped (it raises
+        on a name the caller refuses).
+    - `positions`: whether the `ColumnMap`s keep their 1-based positions.
+
+    **Returns:**
+
+    One `ColumnMap` per name, in order.
+    """
+    mapped: list[ColumnMap] = []
+    seen: dict[str, str] = {}
+    for position, name in enumerate(names, start=1):
+        if check is not None:
+            check(position, name)
+        unit = COLUMNS.get(name)
+        if unit is None:
+            mapped.append(unknown(position, name))
+            continue
+        if unit.quantity in seen:
+            raise ValueError(repeated(name, unit.quantity, seen[unit.quantity]))
+        seen[unit.quantity] = name
+        shown = position if positions else None
+        mapped.append(ColumnMap(name, unit.quantity, unit.to_si, shown))
+    lacking = missing_quantities(seen, required)
+    if lacking:
+        raise ValueError(missing(lacking[0]))
+    return mapped
+
+
 def map_columns(
     names: list[str],
     path,
@@ -122,36 +174,34 @@ def map_columns(
 
     One `ColumnMap` per column, in file order. Unknown names are extra columns.
     """
-    mapped: list[ColumnMap] = []
-    seen: dict[str, str] = {}
-    for position, name in enumerate(names, start=1):
-        shown = position if positions else None
+
+    def check(position: int, name: str) -> None:
         if not name:
             raise ValueError(
                 f"{where(path, line)}: column {position} of the header has no name."
             )
-        if any(m.name == name for m in mapped):
+        # The earlier names are those of the columns mapped so far.
+        if name in names[: position - 1]:
             raise ValueError(f"{where(path, line, name)}: repeated in the header.")
-        unit = COLUMNS.get(name)
-        if unit is None:
-            mapped.append(ColumnMap(name, None, 1.0, shown))
-            continue
-        if unit.quantity in seen:
-            raise ValueError(
-                f"{where(path, line, name)}: a second {unit.quantity} column (the "
-                f"first is '{seen[unit.quantity]}')."
-            )
-        seen[unit.quantity] = name
-        mapped.append(ColumnMap(name, unit.quantity, unit.to_si, shown))
-    missing = missing_quantities(seen, required)
-    if missing:
-        quantity = missing[0]
-        raise ValueError(
+
+    return map_names(
+        names,
+        unknown=lambda position, name: ColumnMap(
+            name, None, 1.0, position if positions else None
+        ),
+        repeated=lambda name, quantity, first: (
+            f"{where(path, line, name)}: a second {quantity} column (the first is "
+            f"'{first}')."
+        ),
+        missing=lambda quantity: (
             f"{where(path, line, written_name(quantity))}: required column is "
             f"missing (the header has {', '.join(names)}; {quantity} is read from "
             f"{accepted_names(quantity)})."
-        )
-    return mapped
+        ),
+        required=required,
+        check=check,
+        positions=positions,
+    )
 
 
 def split_cells(line: str, sep: str) -> list[str]:
@@ -296,9 +346,9 @@ def _parse_rows_fast(
     sep: str,
     decimal_comma: bool,
 ) -> tuple[np.ndarray, np.ndarray] | None:
-    """`parse_rows`'s result by numpy's C parser (ten times faster on 90 000-row
-    exports), or None wherever it might differ: then the exact, line-by-line parser
-    runs and names the line and column of the problem."""
+    """`parse_rows`'s result by numpy's C parser (far faster on exports of many
+    thousand rows), or None wherever it might differ: then the exact, line-by-line
+    parser runs and names the line and column of the problem."""
     if decimal_comma:
         return None
     texts = [lines[n - 1] for n in numbers]

@@ -9,6 +9,7 @@ import numpy as np
 from .parsing import (
     ColumnMap,
     assemble,
+    map_names,
     metadata_value,
     parse_metadata,
     parse_rows,
@@ -23,7 +24,7 @@ from .sniff import (
 )
 from .testdata import TestData, mask_slack
 from .text import read_lines
-from .units import COLUMNS, IGNORE, accepted_names, missing_quantities
+from .units import COLUMNS, IGNORE, accepted_names
 
 
 def _parse_columns_spec(columns: str | Sequence[str], path) -> list[ColumnMap]:
@@ -35,33 +36,28 @@ def _parse_columns_spec(columns: str | Sequence[str], path) -> list[ColumnMap]:
     )
     shown = ",".join(tokens)
     accepted = ", ".join(COLUMNS)
-    mapped: list[ColumnMap] = []
-    seen: dict[str, str] = {}
-    for position, token in enumerate(tokens, start=1):
+
+    def unknown(position: int, token: str) -> ColumnMap:
         if token == IGNORE:
-            mapped.append(ColumnMap(IGNORE, IGNORE, 1.0, position))
-            continue
-        unit = COLUMNS.get(token)
-        if unit is None:
-            raise ValueError(
-                f"{path}: columns '{shown}': column {position} '{token}' is not a "
-                f"column name (accepted: {accepted}, or '-' to ignore a column)."
-            )
-        if unit.quantity in seen:
-            raise ValueError(
-                f"{path}: columns '{shown}': '{token}' is a second {unit.quantity} "
-                f"column (the first is '{seen[unit.quantity]}')."
-            )
-        seen[unit.quantity] = token
-        mapped.append(ColumnMap(token, unit.quantity, unit.to_si, position))
-    missing = missing_quantities(seen)
-    if missing:
-        quantity = missing[0]
+            return ColumnMap(IGNORE, IGNORE, 1.0, position)
         raise ValueError(
+            f"{path}: columns '{shown}': column {position} '{token}' is not a "
+            f"column name (accepted: {accepted}, or '-' to ignore a column)."
+        )
+
+    def repeated(token: str, quantity: str, first: str) -> str:
+        return (
+            f"{path}: columns '{shown}': '{token}' is a second {quantity} "
+            f"column (the first is '{first}')."
+        )
+
+    def missing(quantity: str) -> str:
+        return (
             f"{path}: columns '{shown}' names no {quantity} column "
             f"({accepted_names(quantity)})."
         )
-    return mapped
+
+    return map_names(tokens, unknown=unknown, repeated=repeated, missing=missing)
 
 
 def read_test(

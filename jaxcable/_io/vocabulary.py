@@ -15,6 +15,9 @@ Layouts known (each a header, maybe a units row, maybe metadata lines above it):
 - Shimadzu Trapezium: `Time,Force,Stroke` (試験時間, 試験力, ストローク) over `sec,N,mm`.
 """
 
+from .units import COLUMNS
+
+
 # Header words (lower case) for each quantity. A word of ASCII letters matches a
 # whole word of the header cell (`load` in `Axial load`, not in `Download`); any
 # other word matches anywhere in it (力 in 试验力, `prüfzeit`). A crosshead
@@ -56,27 +59,28 @@ HEADER_WORDS = {
     ),
     "temperature": ("temperature", "temp", "temperatur", "温度"),
 }
-# (quantity, unit as written, lower case) -> canonical column name (`units.COLUMNS`).
+# Canonical column name (`units.COLUMNS`) -> the spellings of its unit in a header
+# or units row, lower case.
+_WRITTEN_UNITS = {
+    "time_s": ("s", "sec", "secs", "second", "seconds", "秒"),
+    "time_ms": ("ms", "msec"),
+    "time_min": ("min", "mins", "minute", "minutes", "分钟"),
+    "time_h": ("h", "hr", "hrs", "hour", "hours", "小时"),
+    "force_N": ("n",),
+    "force_kN": ("kn",),
+    "force_lbf": ("lbf", "lb"),
+    "force_kgf": ("kgf",),
+    "elongation_mm": ("mm",),
+    "elongation_cm": ("cm",),
+    "elongation_m": ("m",),
+    "elongation_in": ("in", "inch"),
+    "temperature_C": ("c", "°c", "℃", "degc", "deg c", "celsius"),
+}
+# (quantity, unit as written, lower case) -> canonical column name.
 HEADER_UNITS = {
-    **{("time", u): "time_s" for u in ("s", "sec", "secs", "second", "seconds", "秒")},
-    ("time", "ms"): "time_ms",
-    ("time", "msec"): "time_ms",
-    **{("time", u): "time_min" for u in ("min", "mins", "minute", "minutes", "分钟")},
-    **{("time", u): "time_h" for u in ("h", "hr", "hrs", "hour", "hours", "小时")},
-    ("force", "n"): "force_N",
-    ("force", "kn"): "force_kN",
-    ("force", "lbf"): "force_lbf",
-    ("force", "lb"): "force_lbf",
-    ("force", "kgf"): "force_kgf",
-    ("elongation", "mm"): "elongation_mm",
-    ("elongation", "cm"): "elongation_cm",
-    ("elongation", "m"): "elongation_m",
-    ("elongation", "in"): "elongation_in",
-    ("elongation", "inch"): "elongation_in",
-    **{
-        ("temperature", u): "temperature_C"
-        for u in ("c", "°c", "℃", "degc", "deg c", "celsius")
-    },
+    (COLUMNS[name].quantity, unit): name
+    for name, units in _WRITTEN_UNITS.items()
+    for unit in units
 }
 # Units of the other columns instruments write (stress, strain, energy), lower case:
 # a row of units under the header holds them too.

@@ -121,8 +121,8 @@ def _solve3(m: Float[Array, "3 3"], b: Float[Array, " 3"]) -> Float[Array, " 3"]
     The matrices solved here (A A^T with a ridge, J^T J of eight well-spread cables)
     are symmetric and well conditioned, where the closed form is as accurate as an LU
     factorisation, and it is plain arithmetic instead of a LAPACK call with its
-    pivoting and differentiation rules in every step of the robot's scan: the loss
-    and gradient of a 5-minute run took 64 -> 50 ms (benchmarks/README.md)."""
+    pivoting and differentiation rules in every step of the robot's scan (the cost
+    of the closed loop's loss and gradient: benchmarks/README.md)."""
     # The columns of the adjugate's transpose: cross products of m's rows.
     r0, r1, r2 = m[0], m[1], m[2]
     c0, c1, c2 = jnp.cross(r1, r2), jnp.cross(r2, r0), jnp.cross(r0, r1)

@@ -159,18 +159,9 @@ def _simulate_robot(robot, scenario, real, controller, gain) -> RobotRun:
         return new, (position, forces, elongation, predicted, command)
 
     xs = (scenario.time, scenario.position, scenario.payload)
-    _, (position, forces, elongation, predicted, command) = jax.lax.scan(
-        body, carry, xs
-    )
-    return RobotRun(
-        time=scenario.time,
-        desired=scenario.position,
-        position=position,
-        forces=forces,
-        elongation=elongation,
-        predicted=predicted,
-        command=command,
-    )
+    # The scan's outputs are RobotRun's fields after `time` and `desired`, in order.
+    _, outputs = jax.lax.scan(body, carry, xs)
+    return RobotRun(scenario.time, scenario.position, *outputs)
 
 
 def compensation_models() -> dict[str, AbstractCableModel | None]:
