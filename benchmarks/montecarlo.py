@@ -110,7 +110,7 @@ def main():
             bins=args.bins,
             method=args.method,
             devices=devices,
-            progress=progress,
+            progress_meter=jc.TextProgressMeter() if progress else jc.NoProgressMeter(),
         )
         t0 = time.perf_counter()
         jc.monte_carlo(sampler, cables, loads, num_draws=min(chunk, draws), **kw)

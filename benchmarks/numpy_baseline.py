@@ -205,7 +205,7 @@ def simulate_rate_test_numpy(
     ca_long = 1.0 / (p["E3r"] * area)
 
     zeros = lambda: np.zeros(batch)
-    # Model state (jaxcable.IntegratedState) and driver state (CableState).
+    # Model state (jaxcable.states.IntegratedState) and driver state (CableState).
     force_prev, strain_prev, force_max = zeros(), zeros(), zeros()
     permanent, short, long, flow = zeros(), zeros(), zeros(), zeros()
     short_max, long_max = zeros(), zeros()

@@ -1,5 +1,6 @@
 import importlib.metadata
 
+from . import states as states
 from ._cable import (
     DEFAULT_BREAKING_STRAIN as DEFAULT_BREAKING_STRAIN,
     Cable as Cable,
@@ -18,12 +19,15 @@ from ._diagnose import (
     residual_structure as residual_structure,
 )
 from ._drive import (
-    CableState as CableState,
-    ControllerState as ControllerState,
+    ELONGATION_DRIVEN as ELONGATION_DRIVEN,
+    FORCE_DRIVEN as FORCE_DRIVEN,
+    TEST_DRIVES as TEST_DRIVES,
+    AbstractTestDrive as AbstractTestDrive,
     LiveFiveElement as LiveFiveElement,
     Newton as Newton,
     Protocol as Protocol,
     Trajectory as Trajectory,
+    as_test_drive as as_test_drive,
     controller_init as controller_init,
     controller_step as controller_step,
     init_state as init_state,
@@ -64,34 +68,21 @@ from ._models import (
     AbstractCableModel as AbstractCableModel,
     AbstractExtension as AbstractExtension,
     BeddingIn as BeddingIn,
-    BeddingInState as BeddingInState,
     BoucWenModel as BoucWenModel,
-    BoucWenState as BoucWenState,
     BurgersModel as BurgersModel,
-    BurgersState as BurgersState,
     CovariateShift as CovariateShift,
     CovariateStrain as CovariateStrain,
-    CovariateStrainState as CovariateStrainState,
     DiscoveredTerm as DiscoveredTerm,
-    DiscoveredTermState as DiscoveredTermState,
     FiveElementModel as FiveElementModel,
-    FiveElementState as FiveElementState,
     Hereditary as Hereditary,
-    HereditaryState as HereditaryState,
     HookeModel as HookeModel,
-    HookeState as HookeState,
     IntegratedModel as IntegratedModel,
-    IntegratedState as IntegratedState,
     MechanoSorptive as MechanoSorptive,
-    MechanoSorptiveState as MechanoSorptiveState,
     ParameterSurface as ParameterSurface,
     SecondRetardation as SecondRetardation,
-    SecondRetardationState as SecondRetardationState,
     SensorDrift as SensorDrift,
-    SensorDriftState as SensorDriftState,
     StrainParts as StrainParts,
     StressNonlinearCreep as StressNonlinearCreep,
-    StressNonlinearCreepState as StressNonlinearCreepState,
     TemperatureShift as TemperatureShift,
     TemperatureShiftWLF as TemperatureShiftWLF,
     TerminationCompliance as TerminationCompliance,
@@ -110,6 +101,12 @@ from ._montecarlo import (
     Normal as Normal,
     Uniform as Uniform,
     monte_carlo as monte_carlo,
+)
+from ._progress import (
+    AbstractProgressMeter as AbstractProgressMeter,
+    CallbackProgressMeter as CallbackProgressMeter,
+    NoProgressMeter as NoProgressMeter,
+    TextProgressMeter as TextProgressMeter,
 )
 from ._report import write_diagnosis_report as write_diagnosis_report
 from ._results import RESULTS as RESULTS

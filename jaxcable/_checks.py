@@ -2,10 +2,10 @@
 
 Two halves with the same domains:
 
-- at the Python boundary (`require_*`, [`check_parameters`][]): raise `ValueError`
+- at the Python boundary (`require_*`, [`check_parameter`][]): raise `ValueError`
     naming the argument and the value before anything is traced or compiled. Traced
     values (inside a user's `jit`, `vmap` or `grad`) are skipped here;
-- traced ([`parameters_ok`][], [`all_ok`][], [`domain_result`][]): the boolean and
+- traced ([`parameter_ok`][], [`all_ok`][], [`domain_result`][]): the boolean and
     the `RESULTS` member that a model's `check` returns, so that the kernels flag
     what the Python boundary could not see.
 """
@@ -30,18 +30,31 @@ def _show(v) -> str:
     return np.array2string(v, threshold=6, precision=6)
 
 
+# A parameter's domain, by name: whether +inf is admitted and the sign required
+# besides (None: any finite value).
+DOMAINS: dict[str, tuple[bool, str | None]] = {
+    "positive": (False, "positive"),
+    "nonnegative": (False, "non-negative"),
+    "positive_or_inf": (True, "positive"),
+    "any": (False, None),
+}
+
+
+def _require(name: str, v: np.ndarray, bad: np.ndarray, kind: str) -> None:
+    if np.any(bad):
+        idx = int(np.flatnonzero(bad.ravel())[0])
+        raise ValueError(
+            f"`{name}` must be {kind}; element {idx} is {v.ravel()[idx]} "
+            f"(value {_show(v)})."
+        )
+
+
 def require_finite(name: str, value, *, allow_inf: bool = False) -> None:
     """Raise `ValueError` naming `name` unless every element of `value` is finite
     (with `allow_inf`: is not NaN)."""
     v = np.asarray(value, dtype=float)
     bad = np.isnan(v) if allow_inf else ~np.isfinite(v)
-    if np.any(bad):
-        idx = int(np.flatnonzero(bad.ravel())[0])
-        kind = "a number (not NaN)" if allow_inf else "finite"
-        raise ValueError(
-            f"`{name}` must be {kind}; element {idx} is {v.ravel()[idx]} "
-            f"(value {_show(v)})."
-        )
+    _require(name, v, bad, "a number (not NaN)" if allow_inf else "finite")
 
 
 def require_positive(
@@ -52,13 +65,7 @@ def require_positive(
     require_finite(name, value, allow_inf=allow_inf)
     v = np.asarray(value, dtype=float)
     bad = v < 0 if allow_zero else v <= 0
-    if np.any(bad):
-        idx = int(np.flatnonzero(bad.ravel())[0])
-        kind = "non-negative" if allow_zero else "positive"
-        raise ValueError(
-            f"`{name}` must be {kind}; element {idx} is {v.ravel()[idx]} "
-            f"(value {_show(v)})."
-        )
+    _require(name, v, bad, "non-negative" if allow_zero else "positive")
 
 
 def require_samples(name: str, value, ndim: int = 1) -> np.ndarray:
@@ -104,51 +111,41 @@ def require_below(name: str, value, limit, limit_name: str) -> None:
         )
 
 
-def check_parameters(
-    model_name: str,
-    model,
-    names,
-    *,
-    positive: bool = True,
-    allow_zero: bool = False,
-    allow_inf: bool = False,
-    reason: str = "",
-    qualified: bool = True,
+def check_parameter(
+    owner: str, name: str, value, domain: str, *, qualified: bool, reason: str = ""
 ) -> None:
-    """Raise `ValueError` naming the first concrete parameter field that is not finite
-    (and, with `positive`, not > 0, or not >= 0 with `allow_zero`).
+    """Raise `ValueError` naming the parameter unless its concrete `value` is in
+    `domain` (a key of [`DOMAINS`][]).
 
-    The one construction-time check of every model's parameters. Traced fields (a
-    model built inside `jit`, `vmap` or `grad`) are skipped: the model's traced
-    `check` flags them with `RESULTS.parameter_out_of_domain` instead (see
-    [`parameters_ok`][], which takes the same domain).
+    The one construction-time check of every model's parameters. A traced value (a
+    model built inside `jit`, `vmap` or `grad`) is skipped: the model's traced
+    `check` flags it with `RESULTS.parameter_out_of_domain` instead (see
+    [`parameter_ok`][], which takes the same domain).
 
     **Arguments:**
 
-    - `model_name`: the class name, for the message.
-    - `model`: the model (any object with the fields as attributes).
-    - `names`: the field names to check.
-    - `positive`, `allow_zero`: the sign required besides finiteness.
-    - `allow_inf`: accept +inf (a modulus whose element is switched off).
-    - `reason`: appended to the message (why the domain is what it is, the unit).
-    - `qualified`: name a field `` `Model.field` `` (the models); with False,
+    - `owner`: the class name, for the message.
+    - `name`, `value`: the field and its value.
+    - `domain`: `"positive"`, `"nonnegative"`, `"positive_or_inf"` (a modulus whose
+        element inf switches off) or `"any"` (finite).
+    - `qualified`: name the field `` `Model.field` `` (the models); with False,
         `` Model `field` ``: the wrappers, whose fields a fit names by their own name.
+    - `reason`: appended to the message (why the domain is what it is, the unit).
     """
-    for name in names:
-        value = getattr(model, name)
-        if not is_concrete(value):
-            continue
-        label = f"{model_name}.{name}" if qualified else name
-        prefix = "" if qualified else f"{model_name} "
-        try:
-            if positive:
-                require_positive(
-                    label, value, allow_zero=allow_zero, allow_inf=allow_inf
-                )
-            else:
-                require_finite(label, value, allow_inf=allow_inf)
-        except (TypeError, ValueError) as e:
-            raise ValueError(f"{prefix}{e} {reason}".rstrip()) from None
+    if not is_concrete(value):
+        return
+    allow_inf, sign = DOMAINS[domain]
+    label = f"{owner}.{name}" if qualified else name
+    prefix = "" if qualified else f"{owner} "
+    try:
+        if sign is None:
+            require_finite(label, value, allow_inf=allow_inf)
+        else:
+            require_positive(
+                label, value, allow_zero=sign == "non-negative", allow_inf=allow_inf
+            )
+    except (TypeError, ValueError) as e:
+        raise ValueError(f"{prefix}{e} {reason}".rstrip()) from None
 
 
 def all_ok(*conditions) -> Bool[Array, ""]:
@@ -159,23 +156,14 @@ def all_ok(*conditions) -> Bool[Array, ""]:
     return ok
 
 
-def parameters_ok(
-    model,
-    names,
-    *,
-    positive: bool = True,
-    allow_zero: bool = False,
-    allow_inf: bool = False,
-) -> Bool[Array, ""]:
-    """The traced counterpart of [`check_parameters`][]: True where every named field
-    of `model` is in the same domain."""
-    conditions = []
-    for name in names:
-        v = getattr(model, name)
-        conditions.append(~jnp.isnan(v) if allow_inf else jnp.isfinite(v))
-        if positive:
-            conditions.append(v >= 0 if allow_zero else v > 0)
-    return all_ok(*conditions)
+def parameter_ok(value, domain: str) -> list[Bool[Array, "*shape"]]:
+    """The traced counterpart of [`check_parameter`][]: the conditions (elementwise)
+    of `value` being in `domain`."""
+    allow_inf, sign = DOMAINS[domain]
+    conditions = [~jnp.isnan(value) if allow_inf else jnp.isfinite(value)]
+    if sign is not None:
+        conditions.append(value >= 0 if sign == "non-negative" else value > 0)
+    return conditions
 
 
 def domain_result(ok: Bool[Array, ""], result: RESULTS = RESULTS.successful) -> RESULTS:
@@ -183,17 +171,24 @@ def domain_result(ok: Bool[Array, ""], result: RESULTS = RESULTS.successful) -> 
     return RESULTS.where(ok, result, RESULTS.parameter_out_of_domain)
 
 
+def unknown_names(names, known) -> tuple[list, bool]:
+    """The members of `names` that are not strings in `known`, in order, and whether
+    a name is repeated."""
+    unknown = [n for n in names if not isinstance(n, str) or n not in known]
+    return unknown, len(set(names)) != len(names)
+
+
 def require_names(argname: str, names, known, owner: str, what: str) -> tuple:
     """Raise `ValueError` naming `argname` unless `names` are distinct members of
     `known` (the `what` of `owner`, e.g. "parameters" of "BurgersModel"); return them
     as a tuple."""
     names = tuple(names)
-    unknown = [n for n in names if not isinstance(n, str) or n not in known]
+    unknown, repeated = unknown_names(names, known)
     if unknown:
         raise ValueError(
             f"`{argname}` names {unknown}, which are not {what} of {owner}; its "
             f"{what} are {list(known)}."
         )
-    if len(set(names)) != len(names):
+    if repeated:
         raise ValueError(f"`{argname}` repeats a name: {list(names)}.")
     return names

@@ -1,9 +1,21 @@
-"""The one progress bar of jaxcable: a one-line text bar on stderr."""
+"""How long work reports its progress: the progress meters passed as
+`progress_meter=` to [`jaxcable.diagnose`][], [`jaxcable.monte_carlo`][], the reports
+and the command line, and the one-line text bar they draw.
 
+A progress meter is a value (like diffrax's `progress_meter`): [`NoProgressMeter`][]
+says nothing, [`TextProgressMeter`][] draws a text bar on stderr and prints each
+step's news, [`CallbackProgressMeter`][] passes the news to a function. Work opens a bar with `meter.bar(label, total)` (a context manager with
+`advance(steps, note)`) and tells of each step with `meter.say(message)`.
+"""
+
+import abc
 import sys
 import threading
 import time
+from collections.abc import Callable
 from typing import TextIO
+
+import equinox as eqx
 
 
 class Progress:
@@ -126,3 +138,93 @@ class Progress:
             self.stream.write("\r" + text + " " * pad)
             self.stream.flush()
             self._width = len(text)
+
+
+class AbstractProgressMeter(eqx.Module):
+    """How work reports its progress: a bar for work of many steps, and news of
+    each step (e.g. which fit runs)."""
+
+    @abc.abstractmethod
+    def bar(
+        self, label: str, total: int | None = None, *, eta: bool = False, keep=False
+    ) -> Progress:
+        """A [`Progress`][] bar (a context manager; `advance(steps, note)` counts
+        steps) for work of `total` steps (None: unknown, a spinner), labelled
+        `label`; with `eta`, the estimated time left; with `keep`, its last line
+        left on the stream at the end."""
+
+    @abc.abstractmethod
+    def say(self, message: str) -> None:
+        """Tell of one step (one line of news)."""
+
+
+class NoProgressMeter(AbstractProgressMeter):
+    """Says nothing: no bar, no news."""
+
+    def bar(self, label, total=None, *, eta=False, keep=False) -> Progress:
+        return Progress(label, total, enabled=False)
+
+    def say(self, message: str) -> None:
+        del message
+
+
+class TextProgressMeter(AbstractProgressMeter):
+    """A one-line text bar on stderr, and each step's news as a line of text.
+
+    **Fields:**
+
+    - `show_bar`: whether to draw bars (the command line draws them when stderr is
+        a terminal and `--quiet` is not given).
+    - `log`: where the news is printed, or None (no news).
+    - `stream`: where the bars are drawn (default `sys.stderr`).
+    """
+
+    show_bar: bool = eqx.field(default=True, static=True)
+    log: TextIO | None = eqx.field(default=None, static=True)
+    stream: TextIO | None = eqx.field(default=None, static=True)
+
+    def bar(self, label, total=None, *, eta=False, keep=False) -> Progress:
+        return Progress(
+            label, total, enabled=self.show_bar, stream=self.stream, eta=eta, keep=keep
+        )
+
+    def say(self, message: str) -> None:
+        if self.log is not None:
+            print(message, file=self.log, flush=True)
+
+
+class CallbackProgressMeter(AbstractProgressMeter):
+    """Each step's news passed to a function (e.g. one that prints it with the time
+    elapsed); no bar.
+
+    **Fields:**
+
+    - `callback`: called as `callback(message)` for each step.
+    """
+
+    callback: Callable[[str], None] = eqx.field(static=True)
+
+    def bar(self, label, total=None, *, eta=False, keep=False) -> Progress:
+        return Progress(label, total, enabled=False)
+
+    def say(self, message: str) -> None:
+        self.callback(message)
+
+
+def check_progress_meter(
+    meter, default: AbstractProgressMeter
+) -> AbstractProgressMeter:
+    """`meter`, or `default` when it is None.
+
+    **Raises:**
+
+    `ValueError` naming `progress_meter` when `meter` is not a progress meter.
+    """
+    if meter is None:
+        return default
+    if not isinstance(meter, AbstractProgressMeter):
+        raise ValueError(
+            "`progress_meter` must be a progress meter (NoProgressMeter(), "
+            f"TextProgressMeter(), CallbackProgressMeter(f)), got {meter!r}."
+        )
+    return meter

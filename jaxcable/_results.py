@@ -1,8 +1,12 @@
-import equinox as eqx
+import optimistix as optx
 
 
-class RESULTS(eqx.Enumeration):
-    """Outcome of a simulation; each member's value is its error message.
+class RESULTS(optx.RESULTS):
+    """Outcome of a simulation or a fit; each member's value is its error message.
+
+    The members of optimistix's `RESULTS` are members here too (a fit reports its
+    solver's result, [`jaxcable.FitResult`][]`.result`); `RESULTS.promote` converts
+    one of optimistix's results.
 
     A simulation run with `throw=True` (the default) raises with this message when the
     result is not `RESULTS.successful`; with `throw=False` the result is returned in
@@ -62,4 +66,9 @@ class RESULTS(eqx.Enumeration):
         "no real cable. Lower the force or the time under load, or give the cable "
         "its measured breaking strain (`math.inf` for a material that does not "
         "break, such as an elastomer)."
+    )
+    every_start_failed = (
+        "Every start of the fit failed: the residuals were not finite at any start "
+        "(a simulation failed, or a parameter left its domain). Try other start "
+        "values or fewer fitted parameters."
     )

@@ -181,7 +181,7 @@ def test_monte_carlo_counts_the_broken_draws():
             num_draws=num_draws,
             method="exact",
             keep_draws=True,
-            progress=False,
+            progress_meter=jc.NoProgressMeter(),
         )
 
     free = run([math.inf, math.inf])

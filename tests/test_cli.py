@@ -675,20 +675,25 @@ def test_fit_params_model_mismatch(burgers_fit, tmp_path, capsys):
 
 
 def test_progress_bar():
-    from jaxcable._report import Progress
+    from jaxcable._progress import NoProgressMeter, TextProgressMeter
 
-    stream = io.StringIO()
-    with Progress("reading", 4, stream=stream) as bar:
+    stream, log = io.StringIO(), io.StringIO()
+    meter = TextProgressMeter(log=log, stream=stream)
+    with meter.bar("reading", 4) as bar:
         bar.advance(note="a.csv")
+        meter.say("fitting candidate x")
         bar.advance(3)
     text = stream.getvalue()
     assert "reading [" + "#" * 6 + "." * 18 + "] 1/4" in text and "a.csv" in text
     assert "] 4/4" in text
     assert text.endswith("\r")  # the bar is erased at the end
-    quiet = io.StringIO()
-    with Progress("fitting", enabled=False, stream=quiet) as bar:
-        bar.advance()
-    assert quiet.getvalue() == ""
+    assert log.getvalue() == "fitting candidate x\n"
+    quiet = TextProgressMeter(show_bar=False, stream=io.StringIO())
+    for silent in (quiet, NoProgressMeter()):
+        with silent.bar("fitting") as bar:
+            bar.advance()
+        silent.say("nothing")
+    assert quiet.stream.getvalue() == ""
 
 
 # ----------------------------------------------------------------------------------

@@ -1,4 +1,4 @@
-"""The diagnosis workflow (issue 4): residual structure, held-out scoring, the named
+"""The diagnosis workflow: residual structure, held-out scoring, the named
 cause, the command line; and the hidden-effect tests (one seed per effect here; the
 10-seed confusion matrix is `benchmarks/diagnose_matrix.py`, results in
 docs/diagnosis.md)."""
@@ -33,6 +33,7 @@ def clean_tests():
         ({"holdout": 0.0}, "holdout"),
         ({"holdout": 0.95}, "holdout"),
         ({"model": "integrated"}, "model"),
+        ({"progress_meter": True}, "progress_meter"),
     ],
 )
 def test_bad_arguments_name_the_argument(clean_tests, kwargs, match):
@@ -157,6 +158,7 @@ def test_cli_diagnose_json_and_report(tmp_path, capsys):
         jc.write_csv(path, t)
         files.append(str(path))
     report = tmp_path / "report"
+    extended = tmp_path / "extended.json"
     status = main(
         [
             "diagnose",
@@ -166,12 +168,24 @@ def test_cli_diagnose_json_and_report(tmp_path, capsys):
             "termination_compliance,sensor_drift",
             "--report",
             str(report),
+            "--out",
+            str(extended),
         ]
     )
-    out = capsys.readouterr().out
+    out, err = capsys.readouterr()
     assert status == 0
     doc = json.loads(out)  # stdout is exactly one JSON object
     assert doc["named_cause"] == "termination_compliance"
+    # --out: the named extended model, fitted, as a PARAMS.json that the library
+    # reads and `jaxcable simulate --params` runs.
+    assert f"wrote {extended}: the base with the named cause" in err
+    fitted = jc.FitResult.from_json(extended)
+    named = jc.EXTENSIONS["termination_compliance"]
+    assert isinstance(fitted.model, named) and named.SIZE_FIELD in fitted.names
+    simulated = tmp_path / "simulated.csv"
+    argv = ["simulate", files[0], "--params", str(extended), "--out", str(simulated)]
+    assert main(argv) == 0, capsys.readouterr().err
+    assert jc.read_csv(simulated).elongation is not None
     for key in ("base_heldout_rmse_mm", "extended_heldout_rmse_mm", "candidates"):
         assert key in doc
     ids = [c["id"] for c in doc["candidates"]]

@@ -1,5 +1,5 @@
 """Fits of displacement-controlled tests: the elongation drive, the control detection,
-and fits that mix force- and displacement-controlled tests (issue 11)."""
+and fits that mix force- and displacement-controlled tests."""
 
 import dataclasses
 import json
@@ -22,6 +22,11 @@ CABLE = jc.Cable.from_mm(length_mm=LENGTH_MM, diameter_mm=3.0, breaking_strain=m
 UNBREAKABLE = {"breaking_strain": math.inf}
 NOISE = 0.005  # of the peak of the scored channel
 SAMPLES = 120
+
+
+def _names(drives) -> tuple[str, ...]:
+    """The names of drive values, as PARAMS.json and the command line write them."""
+    return tuple(d.name for d in drives)
 
 
 def _times(ramp: float, hold: float, n: int = SAMPLES) -> np.ndarray:
@@ -140,11 +145,17 @@ def test_control_is_detected_from_the_data():
 def test_drive_precedence_argument_then_metadata_then_data():
     data, _ = relaxation(0.02, 0, control=None)
     tagged = dataclasses.replace(data, metadata={**data.metadata, "control": "force"})
-    assert jc.pad_tests([data]).drive == ("elongation",)  # detected
-    assert jc.pad_tests([tagged]).drive == ("force",)  # the file's line
-    assert jc.pad_tests([tagged], drive="elongation").drive == ("elongation",)
+    assert _names(jc.pad_tests([data]).drive) == ("elongation",)  # detected
+    assert _names(jc.pad_tests([tagged]).drive) == ("force",)  # the file's line
+    by_name = jc.pad_tests([tagged], drive="elongation")
+    assert _names(by_name.drive) == ("elongation",)
+    # A drive value is accepted where its name is, and compares by value.
+    by_value = jc.pad_tests([tagged], drive=by_name.drive[0])
+    assert by_value.drive == by_name.drive
     mixed = jc.pad_tests([tagged, data], drive=["force", "elongation"])
-    assert mixed.drive == ("force", "elongation")
+    assert _names(mixed.drive) == ("force", "elongation")
+    assert [d.scores_force for d in mixed.drive] == [False, True]
+    assert [d.unit for d in mixed.drive] == ["m", "N"]
 
 
 def test_bad_drives_are_refused():
@@ -171,7 +182,7 @@ def test_round_trip_of_displacement_controlled_tests(
     1.3 x the noise on every test, and the parameters within 3 standard errors."""
     result = displacement_fit
     assert result.converged
-    assert result.drives == ("elongation",) * 3
+    assert _names(result.drives) == ("elongation",) * 3
     assert result.loss_unit == "N^2"
     assert np.all(np.isnan(result.rmse_mm))
     for i, (_, sigma) in enumerate(displacement_tests):
@@ -218,7 +229,7 @@ def test_mixed_fit_recovers_the_parameters(seed):
     ]
     result = jc.fit(START, tests, multistart=1)
     assert result.converged
-    assert result.drives == ("force", "force", "elongation", "elongation")
+    assert _names(result.drives) == ("force", "force", "elongation", "elongation")
     assert result.loss_unit == "1"
     # Residuals in noise units: the SSR is about the number of samples.
     n = int(np.sum(result.num_samples))

@@ -124,7 +124,7 @@ def test_every_entry_point_gives_the_same_elongations(tmp_path):
         num_draws=1,
         method="exact",
         keep_draws=True,
-        progress=False,
+        progress_meter=jc.NoProgressMeter(),
     )
     assert mc.elongation.shape == (1, 1, n)
     _close("monte_carlo", mc.elongation[0, 0], reference)

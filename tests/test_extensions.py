@@ -1,4 +1,4 @@
-"""The candidate model extensions of the diagnosis (issue 4, item 2).
+"""The candidate model extensions of the diagnosis.
 
 Each extension wraps any base model; at its null effect it is the base exactly; each
 test below checks one closed form of its physics, composability, jit/vmap and the
@@ -27,6 +27,7 @@ from jaxcable import (
     log_shift_arrhenius,
     log_shift_wlf,
 )
+from jaxcable._models import parameter_info
 
 from .helpers import PARK_CABLE as CABLE, PARK_MODEL as BASE
 
@@ -88,15 +89,16 @@ def test_registry_and_class_interface():
         assert set(cls.EFFECT_FIELDS) <= fields, cls
         assert cls.SIZE_FIELD in cls.EFFECT_FIELDS
         assert isinstance(cls.SIZE_UNIT, str) and cls.SIZE_UNIT
-        assert set(cls.FIT_INFO) == set(cls.EFFECT_FIELDS)
-        for transform, unit, *_ in cls.FIT_INFO.values():
-            assert transform in ("log", "linear") and unit
+        infos = {n: parameter_info(cls, n) for n in fields}
+        assert {n for n, i in infos.items() if i is not None} == set(cls.EFFECT_FIELDS)
+        for name in cls.EFFECT_FIELDS:
+            assert infos[name].transform in ("log", "linear") and infos[name].unit
         model = cls.wrap(BASE)
         assert isinstance(model, cls) and model.base is BASE
         for name in cls.EFFECT_FIELDS:
             value = float(getattr(model, name))
             assert math.isfinite(value) and value != 0.0, (ext_id, name)
-            if cls.FIT_INFO[name][0] == "log":
+            if infos[name].transform == "log":
                 assert value > 0
 
 
@@ -253,7 +255,7 @@ def test_hereditary_ramp_matches_exact_superposition():
 
 
 def test_hereditary_runs_on_the_base_clock():
-    """Regression (issue 10): the clock of the exact Kelvin-Voigt term is the base's
+    """Regression: the clock of the exact Kelvin-Voigt term is the base's
     continuous tension clock. A rest held at exactly the old switching force (1e-4 of
     the breaking load, 0.2 N) with +-1e-9 N of noise switched whole steps of
     relaxation on and off; now the strain moves by a multiple of the noise."""
@@ -300,7 +302,7 @@ def test_stress_nonlinear_creep_power_law():
 
 
 def test_stress_nonlinear_creep_no_drift_when_the_base_creep_is_stationary():
-    """Regression (issue 10): each creep increment was scaled by g when positive and
+    """Regression: each creep increment was scaled by g when positive and
     by the extra/creep share when negative. Where the base creep is stationary, force
     noise flips the sign of every increment, and the extra creep drifted with the
     total variation of the noise (towards (g - 1) creep). Now it follows the base

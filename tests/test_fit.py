@@ -237,10 +237,34 @@ def test_reproducible_and_json_round_trip(tmp_path):
         np.testing.assert_array_equal(back.stderr, a.stderr)
         np.testing.assert_array_equal(back.rmse_mm, a.rmse_mm)
         assert back.names == a.names and back.test_ids == a.test_ids
+        assert back.result == jc.RESULTS.successful and back.converged
+    assert document["result"] == "successful"
     summary = a.summary()
     assert "E " in summary and "RMSE mm" in summary and "300mm-100N" in summary
     with pytest.raises(ValueError, match="`source`"):
         jc.FitResult.from_json('{"format": "something else"}')
+
+
+def test_result_of_a_fit_that_did_not_converge():
+    """A fit cut short reports its solver's result as a `jaxcable.RESULTS` member
+    (optimistix's, promoted), kept by PARAMS.json by name; `throw=True` raises."""
+    start, tests = jc.HookeModel(E=1e7), _some_tests()
+    result, _ = _fit_quietly(start, tests, fit=["E"], max_steps=1, throw=False)
+    assert result.result == jc.RESULTS.nonlinear_max_steps_reached
+    assert not result.converged
+    assert result.message == str(jc.RESULTS[result.result])
+    assert "NOT converged (" + result.message in result.summary()
+    document = json.loads(result.to_json())
+    assert document["result"] == "nonlinear_max_steps_reached"
+    assert not document["converged"]
+    back = jc.FitResult.from_json(result.to_json())
+    assert back.result == result.result
+    # A file written before results: the member is found by its message.
+    del document["result"]
+    older = jc.FitResult.from_json(json.dumps(document))
+    assert older.result == result.result
+    with pytest.raises(RuntimeError, match="no start converged"):
+        _fit_quietly(start, tests, fit=["E"], max_steps=1)
 
 
 def test_json_per_test_round_trip():

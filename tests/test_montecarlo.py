@@ -59,7 +59,7 @@ def _run(**kwargs):
         chunk_size=CHUNK,
         method="exact",
         keep_draws=True,
-        progress=False,
+        progress_meter=jc.NoProgressMeter(),
     )
     args.update(kwargs)
     return jc.monte_carlo(**args)
@@ -181,7 +181,7 @@ def test_rate_test_with_correlated_parameters():
     key = jax.random.key(7)
     res = jc.monte_carlo(
         sampler, cables, protocol, key=key, num_draws=6, chunk_size=4,
-        method="exact", keep_draws=True, progress=False,
+        method="exact", keep_draws=True, progress_meter=jc.NoProgressMeter(),
     )  # fmt: skip
     elong = np.zeros((6, 2, protocol.num_samples))
     times = np.zeros_like(elong)
@@ -265,7 +265,7 @@ def test_correlated_parameters_reproduce_the_covariance():
         (dict(loads=jc.ForceHistory(TIME, -FORCE)), "force"),
         (dict(loads=jc.ForceHistory(TIME, FORCE + 5000)), "force"),
         (dict(devices=[]), "devices"),
-        (dict(progress="yes"), "progress"),
+        (dict(progress_meter="yes"), "progress_meter"),
     ],
 )
 def test_bad_inputs_raise(kwargs, match):

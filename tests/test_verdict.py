@@ -1,4 +1,4 @@
-"""The verdict of a diagnosis (issue 12): named only when a cause explains the
+"""The verdict of a diagnosis: named only when a cause explains the
 residual, `unexplained` otherwise; covariates in the residual-structure table; the
 JSON keys. Small problems, no fits."""
 
@@ -235,3 +235,5 @@ def test_json_and_summary_of_an_unexplained_verdict():
     assert "stress_nonlinear_creep, explains 45 %" in text
     assert "lag-1 autocorrelation 0.96" in text
     assert "force (r = 0.46)" in text
+    # No cause named: the extended model is the fitted base.
+    assert d.extended_fit() is d.base_fit

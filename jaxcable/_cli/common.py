@@ -4,6 +4,8 @@ switch and the output folders."""
 import pathlib
 import sys
 
+from .._progress import TextProgressMeter
+
 
 PROG = "jaxcable"
 
@@ -28,10 +30,11 @@ def one_line(message) -> str:
     return " ".join(str(message).split())
 
 
-def show_progress(args) -> bool:
-    """Whether to draw progress bars for a command run with `args`."""
+def progress_meter(args, log=None) -> TextProgressMeter:
+    """The progress meter of a command run with `args`: bars on stderr when it is a
+    terminal and `--quiet` is not given, and news on `log` (None: no news)."""
     # Carriage-return bars only on a terminal: logs and pipes get none.
-    return not args.quiet and sys.stderr.isatty()
+    return TextProgressMeter(show_bar=not args.quiet and sys.stderr.isatty(), log=log)
 
 
 def require_folder_of(path: str, option: str) -> None:

@@ -11,7 +11,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from .._io import MetadataConflictWarning, TestData, read_test
-from .._progress import Progress
+from .._progress import AbstractProgressMeter
 from .common import PROG, CliError, one_line
 
 
@@ -87,7 +87,7 @@ def _thin(data: TestData, every: int) -> TestData:
 
 
 def read_tests(
-    paths: Sequence, options: dict, every: int, progress: bool
+    paths: Sequence, options: dict, every: int, meter: AbstractProgressMeter
 ) -> list[TestData]:
     """Measured tests, read with `read_test` (canonical or raw exports).
 
@@ -96,14 +96,14 @@ def read_tests(
     - `paths`: the files.
     - `options`: `read_test` keyword arguments ([`data_options`][]).
     - `every`: keep every `every`-th sample (the first and last kept).
-    - `progress`: whether to draw a progress bar.
+    - `meter`: the progress meter.
 
     **Returns:**
 
     The tests, each with its elongation and a cable; fails naming the file otherwise.
     """
     tests = []
-    with Progress("reading", len(paths), enabled=progress) as bar:
+    with meter.bar("reading", len(paths)) as bar:
         for path in paths:
             data = read_located(read_test, path, **options)
             if data.elongation is None:

@@ -27,7 +27,7 @@ from .._report import (
     write_report,
 )
 from .._results import RESULTS
-from .common import CliError, make_folder, one_line, show_progress
+from .common import CliError, make_folder, one_line, progress_meter
 from .data import read_tests
 from .diagnose import run_diagnosis
 from .fit import fit_failure, run_fit
@@ -254,7 +254,7 @@ def _print_fit(args, result, num_tests: int, source: str, notes: list[str]) -> N
         )
 
 
-def _fit(args, out: pathlib.Path, files: list, source: str, progress: bool):
+def _fit(args, out: pathlib.Path, files: list, source: str, meter):
     """Step 2: the integrated model fitted to the data set, with its report."""
     model = IntegratedModel()
     # By default the identifiable Park parameters; the others keep their defaults:
@@ -272,7 +272,7 @@ def _fit(args, out: pathlib.Path, files: list, source: str, progress: bool):
             else f
             for f in files
         ]
-        tests = read_tests(paths, {}, args.every, progress)
+        tests = read_tests(paths, {}, args.every, meter)
     result = run_fit(
         model,
         "integrated",
@@ -280,7 +280,7 @@ def _fit(args, out: pathlib.Path, files: list, source: str, progress: bool):
         fit_names=names,
         per_test=[],
         args=args,
-        progress=progress,
+        meter=meter,
     )
     failure = fit_failure(result)
     if failure is not None and not np.isfinite(result.loss):
@@ -304,13 +304,13 @@ def _fit(args, out: pathlib.Path, files: list, source: str, progress: bool):
         tests,
         title="jaxcable demo: IntegratedModel fitted to the bundled data set",
         notes=notes,
-        progress=progress,
+        progress_meter=meter,
     )
     _print_fit(args, result, len(tests), source, notes)
     return failure, [params, *written], tests
 
 
-def _diagnose(args, out: pathlib.Path, tests, progress: bool):
+def _diagnose(args, out: pathlib.Path, tests, meter):
     """Step 3: `jaxcable diagnose` on the same tests, report in `out/diagnosis/`."""
     print()
     print(
@@ -321,8 +321,7 @@ def _diagnose(args, out: pathlib.Path, tests, progress: bool):
         IntegratedModel(),
         "integrated",
         tests,
-        progress=progress,
-        log=sys.stdout,
+        meter=meter,
         fit_names=args.fit.split(",") if args.fit else None,
         candidates=None,
         split="time",
@@ -352,7 +351,8 @@ def _outputs(out: pathlib.Path, diagnose: bool) -> list[pathlib.Path]:
 
 def demo_command(args) -> int:
     """Run `jaxcable demo` with the parsed command line `args`; the exit status."""
-    progress = show_progress(args)
+    # Bars on a terminal; the diagnosis's news on stdout with the rest of the demo.
+    meter = progress_meter(args, sys.stdout)
     # Checked first: no data, no demo (and no half-written output folder).
     files, source = _data(args)
     out = pathlib.Path(args.out)
@@ -365,10 +365,10 @@ def demo_command(args) -> int:
     say_replacing(outputs, "--out")
     with write_errors("--out", out):
         results, written = _simulate(args, out)
-        failure, fit_written, tests = _fit(args, out, files, source, progress)
+        failure, fit_written, tests = _fit(args, out, files, source, meter)
         written += fit_written
         if not args.no_diagnose:
-            written += _diagnose(args, out, tests, progress)
+            written += _diagnose(args, out, tests, meter)
     print()
     print(f"Wrote {len(written)} files to {out}{os.sep}: ", end="")
     print(", ".join(p.name for p in written))

@@ -1,5 +1,6 @@
 """`jaxcable diagnose`: what a model gets wrong on measured tests, the named physical
-cause, and the gain on held-out data."""
+cause, and the gain on held-out data; with `--out`, the named extended model, fitted,
+as a PARAMS.json."""
 
 import os
 import pathlib
@@ -7,11 +8,11 @@ import sys
 
 import jax
 
-from .._diagnose import diagnose
+from .._diagnose import Diagnosis, diagnose
 from .._models import AbstractCableModel
-from .._progress import Progress
+from .._progress import AbstractProgressMeter
 from .._report import DIAGNOSIS_REPORT_FILES, write_diagnosis_report
-from .common import CliError, make_folder, require_folder_of, show_progress
+from .common import CliError, make_folder, progress_meter, require_folder_of
 from .data import data_options, describe_tests, read_tests
 from .fit import (
     exported_kernels,
@@ -25,17 +26,21 @@ from .outputs import refuse_inputs, say_replacing, write_errors
 
 
 def run_diagnosis(
-    model: AbstractCableModel, name: str, tests, *, progress: bool, log, **options
-):
-    """`jaxcable.diagnose` of `tests` with base `model`, its log printed to `log`.
+    model: AbstractCableModel,
+    name: str,
+    tests,
+    *,
+    meter: AbstractProgressMeter,
+    **options,
+) -> Diagnosis:
+    """`jaxcable.diagnose` of `tests` with base `model`, its progress shown by `meter`.
 
     **Arguments:**
 
     - `model`: the base model and its start values.
     - `name`: its command-line name, for the errors.
     - `tests`: the measured tests.
-    - `progress`: whether to draw a progress bar.
-    - `log`: the stream for the diagnosis's progress messages.
+    - `meter`: the progress meter (its bar and the news of each fit).
     - `options`: the other keyword arguments of `jaxcable.diagnose`.
 
     **Returns:**
@@ -43,14 +48,9 @@ def run_diagnosis(
     The diagnosis.
     """
     # Every candidate's fits run as programs exported to the cache (see `run_fit`).
-    with Progress("diagnosing", enabled=progress), exported_kernels():
+    with exported_kernels():
         try:
-            return diagnose(
-                tests,
-                model,
-                progress=lambda message: print(message, file=log, flush=True),
-                **options,
-            )
+            return diagnose(tests, model, progress_meter=meter, **options)
         except ValueError as e:
             raise CliError(
                 f"{named_files(tests)}: cannot diagnose with model '{name}': {e}"
@@ -59,18 +59,21 @@ def run_diagnosis(
 
 def diagnose_command(args) -> int:
     """Run `jaxcable diagnose` with the parsed command line `args`; the exit status."""
-    progress = show_progress(args)
-    # With --json, stdout carries the one JSON object; everything else goes to stderr.
-    log = sys.stderr if args.json else sys.stdout
     name, model = resolve_model(
         args, per_test_hint="diagnose fits shared parameters; give start values."
     )
-    outputs = []
+    # With --json, stdout carries the one JSON object; everything else goes to stderr.
+    log = sys.stderr if args.json else sys.stdout
+    meter = progress_meter(args, log)
+    if args.out:
+        require_folder_of(args.out, "--out")
     if args.report:
         require_folder_of(args.report, "--report")
-        outputs = report_files(args.report, DIAGNOSIS_REPORT_FILES)
-        refuse_inputs(outputs, input_files(args))
-    tests = read_tests(args.data, data_options(args), args.every, progress)
+    inputs = input_files(args)
+    reports = report_files(args.report, DIAGNOSIS_REPORT_FILES) if args.report else []
+    outputs = [("--out", args.out)] if args.out else []
+    refuse_inputs(outputs + reports, inputs)
+    tests = read_tests(args.data, data_options(args), args.every, meter)
     # Resolved (and printed) once here: the diagnosis then fits every fold and
     # candidate with these drives.
     drives = test_drives(tests, args.drive)
@@ -80,8 +83,7 @@ def diagnose_command(args) -> int:
         model,
         name,
         tests,
-        progress=progress,
-        log=log,
+        meter=meter,
         fit_names=args.fit.split(",") if args.fit else None,
         candidates=args.candidates.split(",") if args.candidates else None,
         split=args.split,
@@ -97,10 +99,21 @@ def diagnose_command(args) -> int:
     else:
         print(file=log)
         print(diagnosis.summary(), file=log)
+    if args.out:
+        # The named extended model, fitted (the base's fit when no cause is named).
+        say_replacing([args.out], "--out", log)
+        with write_errors("--out", args.out):
+            diagnosis.extended_fit().to_json(args.out)
+        what = (
+            f"the base with the named cause {diagnosis.named_cause}"
+            if diagnosis.verdict == "named"
+            else f"the fitted base model: no cause named (verdict {diagnosis.verdict})"
+        )
+        print(f"wrote {args.out}: {what}", file=log)
     if args.report:
         out = pathlib.Path(args.report)
         make_folder(out, "--report")
-        say_replacing([path for _, path in outputs], "--report", log)
+        say_replacing([path for _, path in reports], "--report", log)
         with write_errors("--report", out):
             written = write_diagnosis_report(out, diagnosis, tests)
         print(

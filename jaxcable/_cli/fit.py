@@ -18,9 +18,9 @@ from .._fit import (
     resolve_drives,
 )
 from .._models import AbstractCableModel
-from .._progress import Progress
+from .._progress import AbstractProgressMeter
 from .._report import FIT_REPORT_FILES, write_report
-from .common import CliError, make_folder, require_folder_of, show_progress
+from .common import CliError, make_folder, progress_meter, require_folder_of
 from .data import data_options, describe_tests, read_tests
 from .models import names_option, resolve_model
 from .outputs import refuse_inputs, say_replacing, write_errors
@@ -67,7 +67,7 @@ def run_fit(
     fit_names: list[str],
     per_test: list[str],
     args,
-    progress: bool,
+    meter: AbstractProgressMeter,
     drive="auto",
 ) -> FitResult:
     """`jaxcable.fit` with the command line's solver options.
@@ -80,7 +80,7 @@ def run_fit(
     - `fit_names`, `per_test`: the parameters to fit, and those fitted per test
         (empty: the defaults of `jaxcable.fit`).
     - `args`: the parsed command line (`starts`, `max_steps`, `seed`).
-    - `progress`: whether to draw a progress bar.
+    - `meter`: the progress meter.
     - `drive`: the drive of every test (see `jaxcable.fit`).
 
     **Returns:**
@@ -91,7 +91,7 @@ def run_fit(
     n = sum(int(np.sum(t.mask)) for t in tests)
     label = f"fitting {name} to {len(tests)} test(s), {n} samples"
     with (
-        Progress(label, enabled=progress),
+        meter.bar(label),
         warnings.catch_warnings(),
         exported_kernels(),
     ):
@@ -127,8 +127,8 @@ def fit_failure(result: FitResult) -> CliError | None:
     """The error to exit with (status 1) when the fit failed or did not converge."""
     if not np.isfinite(result.loss):
         return CliError(
-            f"the fit failed from every start ({result.message}); try other start "
-            "values (--params) or fewer parameters (--fit).",
+            "the fit failed from every start (the residuals were not finite at any "
+            "start); try other start values (--params) or fewer parameters (--fit).",
             status=1,
         )
     if not result.converged:
@@ -143,7 +143,7 @@ def fit_failure(result: FitResult) -> CliError | None:
 
 def fit_command(args) -> int:
     """Run `jaxcable fit` with the parsed command line `args`; the exit status."""
-    progress = show_progress(args)
+    meter = progress_meter(args)
     name, model = resolve_model(
         args,
         per_test_hint="use a plain {name: value} file of start values with --params.",
@@ -155,7 +155,7 @@ def fit_command(args) -> int:
     if args.report:
         outputs += report_files(args.report, FIT_REPORT_FILES)
     refuse_inputs(outputs, input_files(args))
-    tests = read_tests(args.data, data_options(args), args.every, progress)
+    tests = read_tests(args.data, data_options(args), args.every, meter)
     drives = test_drives(tests, args.drive)
     print(f"read {len(tests)} file(s):")
     print("\n".join(describe_tests(tests, args.every, drives)))
@@ -166,8 +166,8 @@ def fit_command(args) -> int:
         fit_names=fit_names,
         per_test=per_test,
         args=args,
-        progress=progress,
-        drive=[d.control for d in drives],
+        meter=meter,
+        drive=[d.drive for d in drives],
     )
     failure = fit_failure(result)
     print()
@@ -197,7 +197,7 @@ def fit_command(args) -> int:
                 tests,
                 title=f"jaxcable fit: model '{name}'",
                 notes=notes,
-                progress=progress,
+                progress_meter=meter,
             )
         print(
             f"wrote the report to {out}{os.sep}: {', '.join(p.name for p in written)}"

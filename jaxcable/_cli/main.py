@@ -62,9 +62,9 @@ def entry() -> None:
     First it freezes the objects that importing jax and jaxcable created (modules,
     classes, the compiler's bindings: they live as long as the process), so that the
     cyclic garbage collector, run by the allocations of tracing and loading
-    programs, no longer rescans them. Measured on a 2-core CPU: a warm `jaxcable
-    fit` of the bundled data, median of 7, 2.40 s -> 2.03 s. Only here, not in
-    `main`, which a test or a script may call many times in one process.
+    programs, no longer rescans them (benchmarks/README.md has the gain on a warm
+    `jaxcable fit`). Only here, not in `main`, which a test or a script may call
+    many times in one process.
 
     Before anything is computed it also lets XLA compile the scans' loops as single
     CPU kernels ([`jaxcable.enable_cpu_loop_kernels`][]; `$JAXCABLE_NO_LOOP_KERNELS`

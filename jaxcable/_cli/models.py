@@ -12,19 +12,31 @@ import json
 import equinox as eqx
 import numpy as np
 
+from .. import _checks
 from .._fit import FitResult
 from .._io import read_json
-from .._models import BY_CLI_NAME, DEFAULT_CLI_MODEL, AbstractCableModel, cli_name
+from .._models import (
+    BY_CLI_NAME,
+    DEFAULT_CLI_MODEL,
+    AbstractCableModel,
+    cli_name,
+    describe,
+    innermost,
+)
 from .common import CliError
 
 
-def parameter_names(model: AbstractCableModel) -> list[str]:
-    """The model's fittable parameters: its inexact-array fields."""
-    return [
-        f.name
-        for f in dataclasses.fields(model)
-        if eqx.is_inexact_array(getattr(model, f.name))
-    ]
+def parameter_names(model: AbstractCableModel, prefix: str = "") -> list[str]:
+    """The model's fittable parameters: its inexact-array fields, and those of the
+    model it wraps by their path (`base.E1c`), as `jaxcable.fit` names them."""
+    names = []
+    for f in dataclasses.fields(model):
+        value = getattr(model, f.name)
+        if eqx.is_inexact_array(value):
+            names.append(prefix + f.name)
+        elif isinstance(value, AbstractCableModel):
+            names += parameter_names(value, f"{prefix}{f.name}.")
+    return names
 
 
 def names_option(
@@ -47,15 +59,15 @@ def names_option(
         return []
     names = [n.strip() for n in value.split(",")]
     available = parameter_names(model)
-    for n in names:
-        if not n:
-            raise CliError(f"{option} {value!r}: an empty name.")
-        if n not in available:
-            raise CliError(
-                f"{option}: '{n}' is not a parameter of model '{name}' (its "
-                f"parameters: {', '.join(available)})."
-            )
-    if len(set(names)) != len(names):
+    unknown, repeated = _checks.unknown_names(names, available)
+    if unknown and not unknown[0]:
+        raise CliError(f"{option} {value!r}: an empty name.")
+    if unknown:
+        raise CliError(
+            f"{option}: '{unknown[0]}' is not a parameter of model '{name}' (its "
+            f"parameters: {', '.join(available)})."
+        )
+    if repeated:
         raise CliError(f"{option} {value!r}: a name is repeated.")
     return names
 
@@ -158,7 +170,8 @@ def resolve_model(args, *, per_test_hint: str) -> tuple[str, AbstractCableModel]
 
     `--params` is either a plain {name: value} object of SI values replacing the
     model's defaults, or a PARAMS.json written by `jaxcable fit`
-    (`FitResult.to_json`), whose model it names; `--model`, when given, must agree.
+    (`FitResult.to_json`), whose model it names (any registered model, extensions
+    around a base included); `--model`, when given, must name its base.
 
     **Arguments:**
 
@@ -169,7 +182,8 @@ def resolve_model(args, *, per_test_hint: str) -> tuple[str, AbstractCableModel]
 
     **Returns:**
 
-    (the model's command-line name, the model).
+    (the model's command-line name, e.g. `integrated` or, for extensions around
+    a base, `bedding-in(integrated)`; the model).
     """
     requested = args.model
     if not args.params:
@@ -179,16 +193,13 @@ def resolve_model(args, *, per_test_hint: str) -> tuple[str, AbstractCableModel]
     doc = read_json(path, "parameters")
     if isinstance(doc, dict) and doc.get("format") == "jaxcable-params":
         result = _read_fit(path, doc)
-        name = cli_name(result.model)
-        if name is None:
-            raise CliError(
-                f"{path}: model {type(result.model).__name__} has no command-line "
-                f"name (known: {', '.join(BY_CLI_NAME)})."
-            )
-        if requested is not None and requested != name:
+        # Every class a PARAMS.json may name is registered, with its name.
+        name = describe(result.model)
+        base = cli_name(innermost(result.model))
+        if requested is not None and requested != base:
             raise CliError(
                 f"{path}: holds a fit of model '{name}', not '{requested}' "
-                f"(--model); drop --model or pass --model {name}."
+                f"(--model); drop --model or pass --model {base}."
             )
         model = _select_test(path, result, getattr(args, "test", None), per_test_hint)
         return name, model
@@ -201,6 +212,9 @@ def params_metadata(model: AbstractCableModel) -> str:
     """The model's parameters as compact JSON (SI), for an output file's metadata."""
     values = {}
     for name in parameter_names(model):
-        v = np.asarray(getattr(model, name), float)
+        v = model
+        for part in name.split("."):
+            v = getattr(v, part)
+        v = np.asarray(v, float)
         values[name] = float(v) if v.ndim == 0 else v.tolist()
     return json.dumps(values, separators=(",", ":"))

@@ -6,7 +6,13 @@ import importlib.metadata
 import math
 from collections.abc import Callable
 
-from .._models import BY_CLI_NAME, DEFAULT_CLI_MODEL, PARK_IDENTIFIABLE
+from .._models import (
+    BY_CLI_NAME,
+    COVARIATE_EXTENSIONS,
+    DEFAULT_CLI_MODEL,
+    EXTENSIONS,
+    PARK_IDENTIFIABLE,
+)
 from .cache import cache_command
 from .common import PROG, CliError
 from .demo import demo_command
@@ -135,6 +141,22 @@ def _add_data_options(parser) -> None:
     )
 
 
+def _add_report_data_and_fit(parser, report: str, title: str, what: str, rest: str):
+    """`--report DIR` (`report`: what it holds), the data options, and the group
+    `title` with `--fit NAMES`: the `what` to fit (`rest`: what becomes of the
+    others); the group."""
+    parser.add_argument("--report", metavar="DIR", help=report)
+    _add_data_options(parser)
+    group = parser.add_argument_group(title)
+    group.add_argument(
+        "--fit",
+        metavar="NAMES",
+        help=f"comma-separated {what} to fit (default: for the integrated model "
+        f"{','.join(PARK_IDENTIFIABLE)}; else all){rest}",
+    )
+    return group
+
+
 def _add_drive_option(parser, what: str) -> None:
     parser.add_argument(
         "--drive",
@@ -184,22 +206,9 @@ def _add_solver_options(parser, starts: int) -> None:
     )
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The parser of the `jaxcable` command line; each command sets `run`, the
-    function that runs it with the parsed arguments and returns the exit status."""
-    parser = _Parser(
-        prog=PROG,
-        description="Differentiable creep models of polymer (Dyneema) cables.",
-    )
-    parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
-    commands = parser.add_subparsers(
-        dest="command", metavar="COMMAND", required=True, parser_class=_Parser
-    )
-
-    sim = commands.add_parser(
-        "simulate",
+_ABOUT = {
+    "simulate": dict(
         help="simulate a rate-driven protocol (JSON) or a force history (CSV)",
-        formatter_class=argparse.RawDescriptionHelpFormatter,
         description=(
             "Simulate a cable model and write the result in the canonical CSV "
             "format\n(time_s,force_N,elongation_mm with '# key: value' metadata).\n\n"
@@ -224,7 +233,104 @@ def build_parser() -> argparse.ArgumentParser:
             "and\nforce_N is filled in, solved sample by sample. The cable is taken from the metadata:\nlength_mm (required), "
             "diameter_mm (default 3) and rate_mm_per_min (default 3)."
         ),
+    ),
+    "fit": dict(
+        help="fit a model to measured tests",
+        description=(
+            "Fit a cable model to one or many measured tests at once by least squares "
+            "(Levenberg-Marquardt, multi-start; see jaxcable.fit): a force-controlled "
+            "test is driven by its force and scored on elongation, a "
+            "displacement-controlled one driven by its elongation and scored on "
+            "force (--drive). "
+            "Material parameters are shared by all tests. Files are read with "
+            "jaxcable.read_test: canonical CSV files or raw tensile-tester exports "
+            "(other separators and encodings, preamble and unit rows, quoted "
+            "numbers); slack stretches are detected, masked and not fitted. Writes "
+            "the fitted parameters as PARAMS.json (use it with 'jaxcable simulate "
+            "--params') and prints the RMSE of every test (mm or N, and % of its peak), the parameters with standard errors and correlations, and "
+            "warnings naming parameters the data cannot identify."
+        ),
+    ),
+    "diagnose": dict(
+        help="find what the model gets wrong and name the physical cause",
+        description=(
+            "Fit the base model (default: the integrated model) to the measured "
+            "tests with the last part of every test held out, analyse its residuals "
+            "for structure (time under load, force, loading vs unloading, cycle, "
+            "rest time, length, rate, temperature and every extra column with its "
+            "rate, autocorrelation), fit every "
+            f"candidate extension ({', '.join(EXTENSIONS)}), score each on the "
+            "held-out data and by BIC, "
+            "and give a verdict: named (the significant candidate of largest "
+            "held-out gain that explains the residual), none (nothing to explain) "
+            "or unexplained. Reads files like 'jaxcable fit'. See jaxcable.diagnose."
+        ),
+    ),
+    "demo": dict(
+        help="simulate Park et al.'s tests and fit the bundled data set",
+        description=(
+            "1. Simulate Park et al.'s test protocol with the default IntegratedModel "
+            "(Dyneema SK78, 3 mm, 300 mm long): one 0-100 N cycle at 3 and 50 mm/min "
+            "(rate effect) and 10 cycles to 100 and 150 N at 3 mm/min; write PNG "
+            "plots (rate_effect.png, cycles10.png) and the simulated histories as "
+            "canonical CSV files. 2. Fit the IntegratedModel to the bundled data set "
+            "(jaxcable/data/*.csv, synthetic: Park's protocol at two lengths, two "
+            f"rates and two force levels). By default {len(PARK_IDENTIFIABLE)} of its 12 "
+            f"parameters are fitted ({', '.join(PARK_IDENTIFIABLE)}), the others kept at "
+            "their defaults, so that the demo takes about a minute; write the fit "
+            "report (params.json, fit_loops.png, fit_residuals.png, summary.md, "
+            "rmse.csv). Prints the headline numbers."
+        ),
+    ),
+    "cache": dict(
+        help="show or clear the compilation cache",
+        description=(
+            "Every command keeps the XLA programs it compiles on disk, so that the "
+            "next run with the same shapes starts in a fraction of the time. The "
+            "cache is per user (JAXCABLE_CACHE_DIR, else $XDG_CACHE_HOME/jaxcable/jax, "
+            "else ~/.cache/jaxcable/jax); JAXCABLE_NO_CACHE=1 turns it off. Prints its "
+            "directory and size."
+        ),
+    ),
+}
+
+
+def _command(commands, name: str, run, raw=False, data=False, params=None):
+    """The subparser of the command `name` (its help and description from
+    `_ABOUT`; `raw`: its description keeps its line breaks), run by `run`; with
+    `data`, the measured tests as arguments; with `params` (the help of
+    `--params`), the model options."""
+    kwargs = {"formatter_class": argparse.RawDescriptionHelpFormatter} if raw else {}
+    parser = commands.add_parser(name, **_ABOUT[name], **kwargs)
+    parser.set_defaults(run=run)
+    if data:
+        parser.add_argument(
+            "data", nargs="+", metavar="DATA.csv", help="the measured tests"
+        )
+    if params is not None:
+        _add_model_options(parser, params)
+    return parser
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The parser of the `jaxcable` command line; each command sets `run`, the
+    function that runs it with the parsed arguments and returns the exit status."""
+    parser = _Parser(
+        prog=PROG,
+        description="Differentiable creep models of polymer (Dyneema) cables.",
     )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
+    commands = parser.add_subparsers(
+        dest="command", metavar="COMMAND", required=True, parser_class=_Parser
+    )
+    for add in (_simulate, _fit, _diagnose, _demo, _cache):
+        add(commands)
+    return parser
+
+
+def _simulate(commands) -> None:
+    """`jaxcable simulate`: a protocol or a history simulated."""
+    sim = _command(commands, "simulate", simulate_command, raw=True)
     sim.add_argument(
         "input",
         metavar="PROTOCOL.json|HISTORY.csv",
@@ -247,51 +353,30 @@ def build_parser() -> argparse.ArgumentParser:
         "--out", metavar="OUT.csv", required=True, help="the file to write"
     )
     _add_drive_option(sim, "of a HISTORY.csv (elongation: force_N is filled in)")
-    sim.set_defaults(run=simulate_command)
 
-    fit = commands.add_parser(
+
+def _fit(commands) -> None:
+    """`jaxcable fit`: a model fitted to measured tests."""
+    fit = _command(
+        commands,
         "fit",
-        help="fit a model to measured tests",
-        description=(
-            "Fit a cable model to one or many measured tests at once by least squares "
-            "(Levenberg-Marquardt, multi-start; see jaxcable.fit): a force-controlled "
-            "test is driven by its force and scored on elongation, a "
-            "displacement-controlled one driven by its elongation and scored on "
-            "force (--drive). "
-            "Material parameters are shared by all tests. Files are read with "
-            "jaxcable.read_test: canonical CSV files or raw tensile-tester exports "
-            "(other separators and encodings, preamble and unit rows, quoted "
-            "numbers); slack stretches are detected, masked and not fitted. Writes "
-            "the fitted parameters as PARAMS.json (use it with 'jaxcable simulate "
-            "--params') and prints the RMSE of every test (mm or N, and % of its peak), the parameters with standard errors and correlations, and "
-            "warnings naming parameters the data cannot identify."
-        ),
-    )
-    fit.add_argument("data", nargs="+", metavar="DATA.csv", help="the measured tests")
-    _add_model_options(
-        fit,
-        "start values: a PARAMS.json written by 'jaxcable fit', or a JSON object of "
+        fit_command,
+        data=True,
+        params="start values: a PARAMS.json written by 'jaxcable fit', or a JSON object of "
         "parameter name -> value (SI units) replacing the model's defaults; fixed "
         "parameters keep these values",
     )
     fit.add_argument(
         "--out", metavar="PARAMS.json", required=True, help="the file to write"
     )
-    fit.add_argument(
-        "--report",
-        metavar="DIR",
-        help="write plots (fit_loops.png: measured vs model force-elongation, one "
+    what = _add_report_data_and_fit(
+        fit,
+        "write plots (fit_loops.png: measured vs model force-elongation, one "
         "panel per test; fit_residuals.png: residuals vs time) and tables "
         "(summary.md, rmse.csv) to this folder",
-    )
-    _add_data_options(fit)
-    what = fit.add_argument_group("what to fit")
-    what.add_argument(
-        "--fit",
-        metavar="NAMES",
-        help="comma-separated parameters to fit (default: for the integrated model "
-        f"{','.join(PARK_IDENTIFIABLE)}; else all); the others keep their start "
-        "values",
+        "what to fit",
+        "parameters",
+        "; the others keep their start values",
     )
     what.add_argument(
         "--per-test",
@@ -300,29 +385,16 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _add_drive_option(fit, "of each test")
     _add_solver_options(fit, starts=4)
-    fit.set_defaults(run=fit_command)
 
-    diag = commands.add_parser(
+
+def _diagnose(commands) -> None:
+    """`jaxcable diagnose`: what the model gets wrong, and its cause."""
+    diag = _command(
+        commands,
         "diagnose",
-        help="find what the model gets wrong and name the physical cause",
-        description=(
-            "Fit the base model (default: the integrated model) to the measured "
-            "tests with the last part of every test held out, analyse its residuals "
-            "for structure (time under load, force, loading vs unloading, cycle, "
-            "rest time, length, rate, temperature and every extra column with its "
-            "rate, autocorrelation), fit every "
-            "candidate extension (hereditary, second_retardation, "
-            "stress_nonlinear_creep, temperature, termination_compliance, "
-            "bedding_in, sensor_drift), score each on the held-out data and by BIC, "
-            "and give a verdict: named (the significant candidate of largest "
-            "held-out gain that explains the residual), none (nothing to explain) "
-            "or unexplained. Reads files like 'jaxcable fit'. See jaxcable.diagnose."
-        ),
-    )
-    diag.add_argument("data", nargs="+", metavar="DATA.csv", help="the measured tests")
-    _add_model_options(
-        diag,
-        "start values of the base model: a PARAMS.json written by 'jaxcable fit', or "
+        diagnose_command,
+        data=True,
+        params="start values of the base model: a PARAMS.json written by 'jaxcable fit', or "
         "a JSON object of parameter name -> value (SI units)",
     )
     diag.add_argument(
@@ -335,25 +407,27 @@ def build_parser() -> argparse.ArgumentParser:
         "stderr",
     )
     diag.add_argument(
-        "--report",
-        metavar="DIR",
-        help="write diagnosis.json, summary.md and plots before/after "
-        "(residuals.png, candidates.png, structure.png) to this folder",
+        "--out",
+        metavar="EXTENDED.json",
+        help="write the extended model the diagnosis names (the base with the named "
+        "cause), fitted, as a PARAMS.json for 'jaxcable simulate --params', "
+        "'jaxcable fit --params' and the controller; the fitted base model when no "
+        "cause is named",
     )
-    _add_data_options(diag)
-    how = diag.add_argument_group("how to diagnose")
-    how.add_argument(
-        "--fit",
-        metavar="NAMES",
-        help="comma-separated base parameters to fit (default: for the integrated "
-        f"model {','.join(PARK_IDENTIFIABLE)}; else all)",
+    how = _add_report_data_and_fit(
+        diag,
+        "write diagnosis.json, summary.md and plots before/after "
+        "(residuals.png, candidates.png, structure.png) to this folder",
+        "how to diagnose",
+        "base parameters",
+        "",
     )
     how.add_argument(
         "--candidates",
         metavar="IDS",
-        help="comma-separated extension ids to try (default: the seven of the "
-        "catalogue, and covariate_strain, mechano_sorptive and covariate_shift for "
-        "each extra column every test records)",
+        help=f"comma-separated extension ids to try (default: the {len(EXTENSIONS)} "
+        f"of the catalogue, and {', '.join(COVARIATE_EXTENSIONS)} for each extra "
+        "column every test records)",
     )
     how.add_argument(
         "--split",
@@ -380,25 +454,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _add_drive_option(diag, "of each test (fixed for every fold and candidate)")
     _add_solver_options(diag, starts=1)
-    diag.set_defaults(run=diagnose_command)
 
-    demo = commands.add_parser(
-        "demo",
-        help="simulate Park et al.'s tests and fit the bundled data set",
-        description=(
-            "1. Simulate Park et al.'s test protocol with the default IntegratedModel "
-            "(Dyneema SK78, 3 mm, 300 mm long): one 0-100 N cycle at 3 and 50 mm/min "
-            "(rate effect) and 10 cycles to 100 and 150 N at 3 mm/min; write PNG "
-            "plots (rate_effect.png, cycles10.png) and the simulated histories as "
-            "canonical CSV files. 2. Fit the IntegratedModel to the bundled data set "
-            "(jaxcable/data/*.csv, synthetic: Park's protocol at two lengths, two "
-            f"rates and two force levels). By default {len(PARK_IDENTIFIABLE)} of its 12 "
-            f"parameters are fitted ({', '.join(PARK_IDENTIFIABLE)}), the others kept at "
-            "their defaults, so that the demo takes about a minute; write the fit "
-            "report (params.json, fit_loops.png, fit_residuals.png, summary.md, "
-            "rmse.csv). Prints the headline numbers."
-        ),
-    )
+
+def _demo(commands) -> None:
+    """`jaxcable demo`: Park et al.'s tests simulated, the bundled data fitted."""
+    demo = _command(commands, "demo", demo_command)
     demo.add_argument(
         "--out",
         metavar="DIR",
@@ -430,21 +490,11 @@ def build_parser() -> argparse.ArgumentParser:
         help="skip step 3, the diagnosis of the fitted data (about a minute)",
     )
     _add_solver_options(demo, starts=2)
-    demo.set_defaults(run=demo_command)
 
-    cache = commands.add_parser(
-        "cache",
-        help="show or clear the compilation cache",
-        description=(
-            "Every command keeps the XLA programs it compiles on disk, so that the "
-            "next run with the same shapes starts in a fraction of the time. The "
-            "cache is per user (JAXCABLE_CACHE_DIR, else $XDG_CACHE_HOME/jaxcable/jax, "
-            "else ~/.cache/jaxcable/jax); JAXCABLE_NO_CACHE=1 turns it off. Prints its "
-            "directory and size."
-        ),
-    )
+
+def _cache(commands) -> None:
+    """`jaxcable cache`: the compilation cache shown or cleared."""
+    cache = _command(commands, "cache", cache_command)
     cache.add_argument(
         "--clear", action="store_true", help="delete the cache directory"
     )
-    cache.set_defaults(run=cache_command)
-    return parser

@@ -9,8 +9,9 @@ import numpy as np
 
 from .._cable import Cable
 from .._drive import (
-    simulate_elongation_history,
-    simulate_force_history,
+    ELONGATION_DRIVEN,
+    FORCE_DRIVEN,
+    AbstractTestDrive,
     simulate_rate_test,
 )
 from .._io import TestData, read_canonical, read_protocol, resolve_control, write_csv
@@ -22,6 +23,8 @@ from .outputs import refuse_inputs, say_replacing, writing
 
 
 _PER_TEST = "choose the test to simulate with --test ID (or its index)."
+# The column a channel is written as.
+_COLUMN = {"force": "force_N", "elongation": "elongation_mm"}
 
 
 def _check_force(data: TestData, cable: Cable) -> None:
@@ -76,26 +79,26 @@ def _write(args, data: TestData) -> None:
         write_csv(tmp, data)
 
 
-def _history_drive(args) -> tuple[TestData, str]:
+def _history_drive(args) -> tuple[TestData, AbstractTestDrive]:
     """The history file, read for its drive, and the drive: `--drive`, else the
     file's `control` line, else the channel it has (detected when it has both)."""
     data = read_located(read_canonical, args.input, overrides={}, required=("time",))
     has_force = bool(np.all(np.isfinite(data.force)))
     if args.drive != "auto" or data.control is not None:
-        drive = resolve_control(data, args.drive).control
+        drive = resolve_control(data, args.drive).drive
     elif data.elongation is None or not has_force:
-        drive = "force" if data.elongation is None else "elongation"
+        drive = FORCE_DRIVEN if data.elongation is None else ELONGATION_DRIVEN
     else:
-        drive = resolve_control(data, "auto").control
-    need = "force_N" if drive == "force" else "elongation_mm"
-    if drive == "force" and not has_force:
+        drive = resolve_control(data, "auto").drive
+    if drive == FORCE_DRIVEN and not has_force:
         # The reader's own located error for the missing force column.
         read_located(
             read_canonical, args.input, overrides={}, required=("time", "force")
         )
-    if drive == "elongation" and data.elongation is None:
+    if drive.imposed_of(data) is None:
         raise CliError(
-            f"{args.input}: an elongation-driven history needs an {need} column."
+            f"{args.input}: an {drive.name}-driven history needs an "
+            f"{_COLUMN[drive.imposed]} column."
         )
     return data, drive
 
@@ -103,17 +106,12 @@ def _history_drive(args) -> tuple[TestData, str]:
 def _simulate_history(args) -> int:
     data, drive = _history_drive(args)
     cable = data.cable()
-    if drive == "force":
+    if drive == FORCE_DRIVEN:
         _check_force(data, cable)
     name, model = resolve_model(args, per_test_hint=_PER_TEST)
     # The measured channel as read, as `fit` drives its model: a PARAMS.json
     # re-simulates the file it was fitted to exactly as the fit saw it.
-    if drive == "force":
-        traj = simulate_force_history(model, cable, data.time, data.force, throw=False)
-    else:
-        traj = simulate_elongation_history(
-            model, cable, data.time, data.elongation, throw=False
-        )
+    traj = drive.simulate(model, cable, data.time, drive.imposed_of(data), throw=False)
     _check_success(
         traj, name, lambda i: str(args.input) if i is None else data.locate(i)
     )
@@ -122,20 +120,15 @@ def _simulate_history(args) -> int:
     metadata.setdefault("diameter_mm", float(cable.diameter) * 1e3)
     metadata.setdefault("rate_mm_per_min", float(cable.speed) * 1e3 * 60)
     metadata["model"] = name
-    metadata["control"] = drive
+    metadata["control"] = drive.name
     if args.params:
         metadata["model_params"] = params_metadata(model)
-    if drive == "force":
-        out = dataclasses.replace(
-            data, elongation=np.asarray(traj.elongation), metadata=metadata
-        )
-    else:
-        out = dataclasses.replace(data, force=np.asarray(traj.force), metadata=metadata)
+    simulated = {drive.scored: np.asarray(drive.scored_of(traj))}
+    out = dataclasses.replace(data, **simulated, metadata=metadata)
     _write(args, out)
-    filled = "elongation_mm" if drive == "force" else "force_N"
     print(
-        f"wrote {args.out} ({data.num_samples} samples, {filled} simulated by "
-        f"model '{name}', {drive} drive)"
+        f"wrote {args.out} ({data.num_samples} samples, {_COLUMN[drive.scored]} "
+        f"simulated by model '{name}', {drive.name} drive)"
     )
     return 0
 
@@ -156,7 +149,7 @@ def _simulate_protocol(args) -> int:
         "protocol": pathlib.Path(args.input).name,
         "model": name,
         # A fit of this file drives it by its force history, as it was made.
-        "control": "force",
+        "control": FORCE_DRIVEN.name,
     }
     if args.params:
         metadata["model_params"] = params_metadata(model)

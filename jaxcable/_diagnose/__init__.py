@@ -1,15 +1,8 @@
+from .base import BaseFit as BaseFit
 from .diagnose import diagnose as diagnose
 from .discover import DiscoveryResult as DiscoveryResult, discover as discover
-from .elongations import (
-    model_elongations as model_elongations,
-    model_outputs as model_outputs,
-    scored_residuals as scored_residuals,
-)
-from .heldout import (
-    heldout_rmse as heldout_rmse,
-    heldout_start as heldout_start,
-    noise_level as noise_level,
-)
+from .heldout import heldout_start as heldout_start
+from .plan import Plan as Plan, covariate_columns as covariate_columns
 from .result import (
     MAX_DELTA_BIC as MAX_DELTA_BIC,
     MIN_EXCESS as MIN_EXCESS,
@@ -18,11 +11,20 @@ from .result import (
     Candidate as Candidate,
     Diagnosis as Diagnosis,
 )
-from .scoring import Scoring as Scoring, noise_floor as noise_floor, scoring as scoring
+from .scoring import (
+    Scoring as Scoring,
+    heldout_rmse as heldout_rmse,
+    model_elongations as model_elongations,
+    model_outputs as model_outputs,
+    noise_floor as noise_floor,
+    noise_level as noise_level,
+    scored_residuals as scored_residuals,
+    scoring as scoring,
+)
 from .structure import (
-    covariates as covariates,
     rate_of_change as rate_of_change,
     residual_structure as residual_structure,
+    test_covariates as test_covariates,
 )
 from .verdict import (
     MAX_FLOOR_RATIO as MAX_FLOOR_RATIO,

@@ -1,7 +1,9 @@
 """Discovery of a term the base model lacks: sparse regression of the base's strain
 residual on a library of integrated terms ([`jaxcable.DiscoveredTerm`][]) and the
-base's own parameter sensitivities, the sparsity chosen on held-out samples, then a joint Levenberg-Marquardt fit of the
-base with the chosen terms, reported as an equation with units.
+base's own parameter sensitivities, the sparsity chosen on held-out samples, then a
+joint Levenberg-Marquardt fit of the base with the chosen terms, reported as an
+equation with units; and the diagnosis's discovery stage, over no covariate and
+every recorded one, scored like the catalogue's candidates.
 
 Discovery runs on force-driven tests (the model driven by the measured force, the
 elongation scored): the library terms are functions of the force history and the
@@ -10,36 +12,40 @@ covariate, which an elongation-driven test does not prescribe.
 
 import dataclasses
 import math
+import warnings
+from typing import Any
 
-import equinox as eqx
-import jax
-import jax.numpy as jnp
 import numpy as np
 
+from .._drive import FORCE_DRIVEN, as_test_drive
 from .._fit import (
     FitResult,
+    IdentifiabilityWarning,
     as_test_list,
     fit,
-    make_problem,
     model_responses,
-    residuals_and_jacobian,
     test_id,
 )
-from .._models import AbstractCableModel, discovered
-from .heldout import heldout_start, with_mask
+from .._models import AbstractCableModel
+from .._progress import AbstractProgressMeter
+from .base import BaseFit
+from .heldout import heldout_start
+from .library import (
+    COVARIATE_TERMS,
+    MAX_TERMS,
+    TERMS,
+    THETA_FIELDS,
+    DiscoveredTerm,
+    base_fit_names,
+    base_start,
+    library,
+    sensitivities,
+    theta_unit,
+)
+from .plan import Plan
+from .result import Candidate
+from .scoring import force_scoring, scored_candidate, training_score
 
-
-MAX_TERMS = discovered.MAX_TERMS
-TERMS = discovered.TERMS
-THETA_FIELDS = discovered.THETA_FIELDS
-DiscoveredTerm = discovered.DiscoveredTerm
-cycle_count = discovered.cycle_count
-term_increments = discovered.term_increments
-theta_unit = discovered.theta_unit
-tension_time_step = discovered.tension_time_step
-
-# The terms that read the covariate (left out of the library without one).
-COVARIATE_TERMS = ("c", "c_rate", "c_abs_rate", "sigma_c", "sigma_c_abs_rate")
 
 # A support is kept only when its held-out RMSE of the residual is this share below
 # that of no term (percent): on noise alone, a term fitted to the training samples
@@ -82,71 +88,31 @@ class DiscoveryResult:
     gain_pct: float
     path: tuple[tuple[tuple[str, ...], float], ...]
 
+    def describe(self) -> dict[str, Any]:
+        """The term for [`jaxcable.Diagnosis`][]`.discovered`: the equation, terms,
+        covariate, coefficients with standard errors and units, held-out RMSEs and
+        gain."""
+        return {
+            "equation": self.equation,
+            "terms": list(self.terms),
+            "covariate": self.covariate,
+            "values": [float(v) for v in self.values],
+            "stderr": [float(s) for s in self.stderr],
+            "units": list(self.units),
+            "heldout_rmse_mm": [float(x) for x in self.heldout_rmse_mm],
+            "gain_pct": float(self.gain_pct),
+        }
 
-def library(test, covariate: str | None, names=tuple(TERMS)) -> dict[str, np.ndarray]:
-    """Each library term's contribution to the discovered strain per unit theta,
-    eps_k(t) (the cumulative sum of [`term_increments`][] along the test, as
-    `DiscoveredTerm.advance` integrates it), host-side.
-
-    **Arguments:**
-
-    - `test`: a force-driven test (time s, force N, `cable()`).
-    - `covariate`: the extra column read as c, or None (c = 0).
-    - `names`: the terms wanted.
-
-    **Returns:**
-
-    `{term: eps_k per sample}` (1/theta_k units: s x unit of phi).
-    """
-    time = np.asarray(test.time, float)
-    force = np.asarray(test.force, float)
-    c = np.zeros_like(time)
-    if covariate is not None:
-        c = np.asarray(test.extra[covariate], float)
-    cable = test.cable()
-    area = float(cable.area)
-    # The first sample is applied from the unloaded cable at time[0] (dt = 0).
-    force0 = np.r_[0.0, force[:-1]]
-    c0 = np.r_[c[0], c[:-1]]
-    dt = np.r_[0.0, np.diff(time)]
-    force_max = np.maximum.accumulate(np.maximum(force, 0.0))
-    dt_loaded = np.asarray(
-        jax.vmap(tension_time_step, in_axes=(0, 0, 0, None, 0))(
-            jnp.asarray(force0), jnp.asarray(force), jnp.asarray(dt), cable, force_max
-        ),
-        float,
-    )
-    loaded = np.cumsum(dt_loaded)
-    rest = np.cumsum(dt - dt_loaded)
-    cycles = np.asarray(
-        cycle_count(np.cumsum(np.abs(force - force0)), force_max), float
-    )
-
-    def before(x):
-        return np.r_[0.0, x[:-1]]
-
-    increments = term_increments(
-        force0 / area,
-        force / area,
-        c0,
-        c,
-        dt,
-        before(loaded),
-        loaded,
-        before(rest),
-        rest,
-        before(cycles),
-        cycles,
-    )
-    return {k: np.cumsum(np.asarray(increments[k], float)) for k in names}
-
-
-def base_start(base_fit: FitResult) -> AbstractCableModel:
-    """The fitted base as a start model (per-test values averaged to scalars)."""
-    return jax.tree_util.tree_map(
-        lambda x: jnp.mean(x) if eqx.is_inexact_array(x) and x.ndim else x,
-        base_fit.model,
-    )
+    def size(self) -> tuple[float, float, str, str]:
+        """`(value, standard error, unit, name)` of its best-determined theta, the
+        size of the discovered candidate (a support may carry a weak companion
+        term, which the forward selection kept for a small held-out gain)."""
+        values = np.asarray(self.values, float)
+        errors = np.asarray(self.stderr, float)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            zs = np.where(errors > 0, np.abs(values) / errors, np.inf)
+        k = int(np.nanargmax(np.where(np.isfinite(values), zs, -1.0)))
+        return values[k], errors[k], self.units[k], f"theta{k} ({self.terms[k]})"
 
 
 def _equation(terms, values, stderr, covariate) -> str:
@@ -158,36 +124,6 @@ def _equation(terms, values, stderr, covariate) -> str:
         err = f" (+-{se:.2g})" if math.isfinite(se) else ""
         parts.append(f"{v:.3g}{err} {theta_unit(t, f'[{name}]')} * {symbol}")
     return "d(eps)/dt = " + (" + ".join(parts) if parts else "0")
-
-
-def _sensitivities(base, base_fit: FitResult, tests) -> list[np.ndarray]:
-    """d(model elongation)/du of the base's fitted parameters at its fit (u: the
-    fit's unconstrained parameters, log for the positive ones), m, one
-    `(samples, p)` array per test, every sample."""
-    names = list(dict.fromkeys(n.split("[")[0] for n in base_fit.names))
-    full = [
-        dataclasses.replace(
-            t, mask=None, elongation=np.nan_to_num(np.asarray(t.elongation, float))
-        )
-        for t in tests
-    ]
-    problem, u = make_problem(base, full, names, None, None, "force")
-    _, jacobian = residuals_and_jacobian(problem, u, "fwd")
-    jacobian = np.asarray(jacobian).reshape(len(full), -1, u.shape[0])
-    return [jacobian[i, : len(t.time)] for i, t in enumerate(full)]
-
-
-def heldout_rmse_mm(model, tests, held, covariate) -> float:
-    """RMSE over the held-out samples each test's own mask keeps (as the
-    diagnosis scores), mm."""
-    response = model_responses(model, tests, drive="force", covariate=covariate)
-    sq, n = 0.0, 0
-    for r, t, h in zip(response, tests, held):
-        own = getattr(t, "mask", None)
-        keep = h if own is None else h & np.asarray(own, bool)
-        sq += float(np.sum((r - np.asarray(t.elongation, float))[keep] ** 2))
-        n += int(keep.sum())
-    return 1e3 * math.sqrt(sq / max(n, 1))
 
 
 def discover(
@@ -226,7 +162,7 @@ def discover(
     - `base_fit`: a [`jaxcable.FitResult`][] of the base model (on the training
         samples of these tests, for an honest held-out score).
     - `tests`: the tests ([`jaxcable.TestData`][]); only force-driven ones are
-        used (a test whose drive in `base_fit` is not `"force"` is skipped).
+        used (a test not force-driven in `base_fit` is skipped).
     - `covariate`: an extra column present in every test (its unit is the
         column's), or None: no covariate terms.
     - `holdout`: the held-out fraction at the end of every test (the diagnosis's
@@ -248,18 +184,17 @@ def discover(
     covariate column is missing (naming the test).
     """
     tests = as_test_list(tests)
-    drives = getattr(base_fit, "drives", ()) or ("force",) * len(tests)
-    keep = [i for i, d in enumerate(drives) if d == "force"]
+    drives = getattr(base_fit, "drives", ()) or (FORCE_DRIVEN,) * len(tests)
+    keep = [i for i, d in enumerate(drives) if as_test_drive(d) == FORCE_DRIVEN]
     if not keep:
         raise ValueError(
             "discover runs on force-driven tests; none of `tests` is force-driven."
         )
     tests = [tests[i] for i in keep]
     if held is None:
-        held = []
-        for t in tests:
-            n = len(t.time)
-            held.append(np.arange(n) >= heldout_start(n, holdout))
+        held = [
+            np.arange(len(t.time)) >= heldout_start(len(t.time), holdout) for t in tests
+        ]
     else:
         held = [np.asarray(held[i], bool) for i in keep]
     if covariate is not None:
@@ -281,9 +216,10 @@ def discover(
         raise ValueError(f"`terms` {unknown} are not in the library {list(TERMS)}.")
 
     base = base_start(base_fit)
-    response = model_responses(base, tests, drive="force")
-    sensitivity = _sensitivities(base, base_fit, tests)
-    rows = []
+    shared, per = base_fit_names(base_fit)
+    sensitivity = sensitivities(base, base_fit, tests)
+    response = model_responses(base, tests, drive=FORCE_DRIVEN.name)
+    rows, train_tests = [], []
     for t, m, h, sens in zip(tests, response, held, sensitivity):
         length = float(t.cable().length)
         measured = np.asarray(t.elongation, float)
@@ -294,6 +230,8 @@ def discover(
         lib = library(t, covariate, names)
         cum = np.stack([lib[k] for k in names], axis=1)
         rows.append((r, cum, sens / length, valid & ~h, valid & h, length))
+        # The training samples of the joint fit: those of its own mask not held out.
+        train_tests.append(dataclasses.replace(t, mask=~h & own))
 
     def solve(columns: list[int]) -> tuple[np.ndarray, np.ndarray]:
         """Least squares of the training residual on the chosen terms' strains and
@@ -351,22 +289,16 @@ def discover(
 
     thetas = dict(zip(THETA_FIELDS, coefficients))
     model = DiscoveredTerm(base, terms=chosen, **thetas) if chosen else base
-    base_rmse = heldout_rmse_mm(base, tests, held, None)
     result, values = None, coefficients
     stderr = np.full(len(chosen), np.nan)
     if chosen and joint_fit:
-        base_names = [n.split("[")[0] for n in base_fit.names]
-        fitted = list(dict.fromkeys("base." + n for n in base_names))
-        per = ["base." + n for n in getattr(base_fit, "per_test", ())]
-        fitted += list(model.used_fields())
-        train_tests = [with_mask(t, ~h) for t, h in zip(tests, held)]
         options = {"multistart": 1, "throw": False, **fit_kwargs}
         result = fit(
             model,
             train_tests,
-            fit=[n for n in fitted if n not in per],
+            fit=[*shared, *model.used_fields()],
             per_test=per or None,
-            drive="force",
+            drive=FORCE_DRIVEN.name,
             covariate=covariate,
             **options,
         )
@@ -374,7 +306,13 @@ def discover(
         values = np.asarray(result.values, float)[index]
         stderr = np.asarray(result.stderr, float)[index]
         model = result.model
-    rmse = heldout_rmse_mm(model, tests, held, covariate) if chosen else base_rmse
+    how = force_scoring(tests)
+    base_rmse = how.rmse(base, tests, range(len(tests)), held)
+    rmse = (
+        how.rmse(model, tests, range(len(tests)), held, covariate)
+        if chosen
+        else base_rmse
+    )
     return DiscoveryResult(
         terms=chosen,
         coefficients=coefficients,
@@ -389,3 +327,109 @@ def discover(
         gain_pct=100.0 * (1.0 - rmse / base_rmse) if base_rmse > 0 else 0.0,
         path=report_path,
     )
+
+
+def term_coefficient(base_fit: FitResult, tests, held, covariate: str, term: str):
+    """The regression coefficient of one library `term` on the residual of
+    `base_fit` (with the base's sensitivities, as the discovery fits it; no joint
+    fit), or None when the regression does not keep it or it is not finite.
+
+    **Arguments:**
+
+    - `base_fit`, `tests`, `held`, `covariate`: as in [`jaxcable.discover`][].
+    - `term`: the library term (a key of `TERMS`).
+
+    **Returns:**
+
+    The coefficient, 1/s per unit of the term, or None.
+    """
+    found = discover(
+        base_fit,
+        tests,
+        covariate=covariate,
+        held=held,
+        terms=(term,),
+        min_gain_pct=-math.inf,
+        joint_fit=False,
+    )
+    value = float(found.coefficients[0]) if found.terms else 0.0
+    return value if math.isfinite(value) and value != 0.0 else None
+
+
+@dataclasses.dataclass(frozen=True)
+class Discovered:
+    """The discovery stage of a diagnosis.
+
+    **Fields:**
+
+    - `candidate`: the discovered term scored as a candidate (`"discovered"`).
+    - `description`: the term for [`jaxcable.Diagnosis`][]`.discovered`: the
+        equation, terms, covariate, coefficients with standard errors and units,
+        held-out RMSEs and gain, and every covariate option's held-out residual
+        RMSE (`covariate_scores_mm`).
+    """
+
+    candidate: Candidate
+    description: dict[str, Any]
+
+
+def discovery_stage(
+    plan: Plan, base: BaseFit, *, max_steps: int, progress_meter: AbstractProgressMeter
+) -> Discovered | None:
+    """The best discovered term over no covariate and each recorded one, scored.
+
+    The regression (no joint fit) runs for each covariate option; the option whose
+    chosen support leaves the least held-out residual is fitted jointly with the
+    base ([`jaxcable.discover`][]) and scored like the catalogue's candidates (same
+    held-out samples, BIC, size = its best-determined coefficient). It runs on the
+    time split of force-driven tests.
+
+    **Arguments:**
+
+    - `plan`: the diagnosis's [`Plan`][].
+    - `base`: the base model's [`BaseFit`][] on the training samples.
+    - `max_steps`: Levenberg-Marquardt steps of the joint fit.
+    - `progress_meter`: told of the stage.
+
+    **Returns:**
+
+    A [`Discovered`][], or None when no option found a term or its fit failed.
+    """
+    tests, base_fit = plan.tests, base.fit
+    progress_meter.say("discovering a term")
+    held = [t.mask for t in plan.time_fold.held]
+    scores: dict[str, float] = {}
+    best, best_score = None, math.inf
+    for covariate in [None, *plan.columns]:
+        found = discover(
+            base_fit, tests, covariate=covariate, held=held, joint_fit=False
+        )
+        if not found.terms:
+            continue
+        score = dict(found.path)[found.terms]
+        scores[covariate or "-"] = score
+        if score < best_score:
+            best, best_score = covariate, score
+    if not scores:
+        return None
+    # As for the catalogue's candidates, identifiability is reported in the
+    # candidate's fit, not warned about.
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", IdentifiabilityWarning)
+        found = discover(
+            base_fit,
+            tests,
+            covariate=best,
+            held=held,
+            multistart=1,
+            max_steps=max_steps,
+        )
+    if found.fit is None:
+        return None
+    description = {**found.describe(), "covariate_scores_mm": scores}
+    size = found.size()
+    score = training_score(found.fit, found.heldout_rmse_mm[1])
+    candidate = scored_candidate(
+        "discovered", found.fit, score, size, found.equation, base.against, plan.how
+    )
+    return Discovered(candidate, description)

@@ -1,17 +1,12 @@
 """Held-out data: the blocked time split and the cross-validation folds by tests of
-[`jaxcable.diagnose`][], the RMSE of a model on the held-out samples, and the noise
-level estimated from the data."""
+[`jaxcable.diagnose`][]."""
 
 import dataclasses
-import math
 from typing import Literal, NamedTuple
 
 import numpy as np
 
-from .._fit import as_test_list
 from .._io import TestData
-from .._models import AbstractCableModel
-from .scoring import scoring
 
 
 def with_mask(test: TestData, mask: np.ndarray) -> TestData:
@@ -25,6 +20,14 @@ def with_mask(test: TestData, mask: np.ndarray) -> TestData:
 def heldout_start(n: int, holdout: float) -> int:
     """The first held-out sample of an `n`-sample test under the time split."""
     return int(round(n * (1.0 - holdout)))
+
+
+def heldout_masks(tests, holdout: float) -> list[np.ndarray]:
+    """One boolean array per test, True on the last `holdout` fraction of its
+    samples (the held-out samples of the time split)."""
+    return [
+        np.arange(len(t.time)) >= heldout_start(len(t.time), holdout) for t in tests
+    ]
 
 
 def time_split(tests, holdout: float) -> tuple[list, list]:
@@ -78,54 +81,3 @@ def splits(
             Fold([tests[i] for i in train], [tests[i] for i in held], train, held)
         )
     return out
-
-
-def heldout_rmse(
-    model: AbstractCableModel,
-    tests,
-    *,
-    holdout: float = 0.3,
-    drive="auto",
-) -> float:
-    """The RMSE of a given model on the held-out samples of `diagnose`'s time split
-    (the last `holdout` fraction of every test), in the unit `diagnose` reports.
-
-    For the data-generating model of synthetic data this is the floor no fitted model
-    can beat: the elongation noise plus the response to the force noise the model is
-    driven with. The hidden-effect tests compare the named model against it.
-
-    **Arguments:**
-
-    - `model`: the model, with its parameters.
-    - `tests`: the tests ([`jaxcable.TestData`][]).
-    - `holdout`: the held-out fraction of every test.
-    - `drive`: each test's drive, as in [`jaxcable.diagnose`][] (default `"auto"`).
-
-    **Returns:**
-
-    The pooled RMSE over all held-out samples: mm when every test is driven by its
-    force (its elongation scored), N when every test is driven by its elongation,
-    noise units (each residual / its scored channel's noise) when the drives mix.
-    """
-    tests = as_test_list(tests)
-    how = scoring(tests, drive)
-    _, held = time_split(tests, holdout)
-    r = how.residuals(model, held, range(len(held)))
-    sq = sum(float(np.sum(x[t.mask] ** 2)) for t, x in zip(held, r))
-    n = sum(int(np.sum(t.mask)) for t in held)
-    return how.factor * math.sqrt(sq / n)
-
-
-def noise_level(tests) -> float:
-    """A robust estimate of the elongation noise, m: the median absolute second
-    difference of each test's elongation, / 0.6745 / sqrt(6) (for white noise the
-    second difference has variance 6 sigma^2; the signal's own curvature between
-    dense samples is far smaller and the median ignores the reversals), the median
-    over tests."""
-    values = []
-    for t in as_test_list(tests):
-        e = np.asarray(t.elongation, float)
-        if e.size >= 5:
-            d2 = np.diff(e, 2)
-            values.append(np.median(np.abs(d2)) / 0.6745 / math.sqrt(6.0))
-    return float(np.median(values)) if values else float("nan")

@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from .._drive import AbstractTestDrive, as_test_drive
 from .._files import write_text_atomic
 from .._fit import FitResult
 from .verdict import (
@@ -24,6 +25,20 @@ MIN_GAIN_PCT = 5.0
 MAX_DELTA_BIC = -10.0
 MIN_SIZE_Z = 3.0
 # MIN_EXCESS, MAX_FLOOR_RATIO and MIN_EXPLAINED_PCT (the verdict): see `verdict.py`.
+
+
+class _InMm:
+    """A read-only attribute: the field `name` (in the object's `unit`) in mm; NaN
+    unless `unit` is mm (the mm fields keep meaning mm)."""
+
+    def __init__(self, name: str):
+        self.name = name
+        self.__doc__ = f"`{name}` in mm (NaN unless `unit` is mm)."
+
+    def __get__(self, obj, owner=None):
+        if obj is None:
+            return self
+        return getattr(obj, self.name) if obj.unit == "mm" else math.nan
 
 
 @dataclasses.dataclass(frozen=True)
@@ -71,15 +86,8 @@ class Candidate:
     unit: str = "mm"
     explained_pct: float = math.nan
 
-    @property
-    def heldout_rmse_mm(self) -> float:
-        """The held-out RMSE, mm (NaN unless every test is scored in elongation)."""
-        return _in_mm(self.heldout_rmse, self.unit)
-
-    @property
-    def train_rmse_mm(self) -> float:
-        """The training RMSE, mm (NaN unless every test is scored in elongation)."""
-        return _in_mm(self.train_rmse, self.unit)
+    heldout_rmse_mm = _InMm("heldout_rmse")
+    train_rmse_mm = _InMm("train_rmse")
 
     @classmethod
     def not_applicable(
@@ -145,7 +153,8 @@ class Diagnosis:
         its force, its elongation scored), `"N"` (every test driven by its
         elongation, its force scored) or `"noise"` (both kinds: each residual
         divided by the noise standard deviation of its test's scored channel).
-    - `drives`: each test's drive, `"force"` or `"elongation"`.
+    - `drives`: each test's drive value ([`jaxcable.FORCE_DRIVEN`][] or
+        [`jaxcable.ELONGATION_DRIVEN`][]; by name in the JSON).
     - `scales`: each test's residual unit (1, or in noise units the noise standard
         deviation of its scored channel, m or N).
     - `discovered`: the term [`jaxcable.discover`][] found when the catalogue did
@@ -175,30 +184,24 @@ class Diagnosis:
     test_ids: tuple[str, ...]
     base_fit: FitResult = dataclasses.field(repr=False, compare=False)
     unit: str = "mm"
-    drives: tuple[str, ...] = ()
+    drives: tuple[AbstractTestDrive, ...] = ()
     scales: tuple[float, ...] = ()
     verdict: str = "none"
     discovered: dict[str, Any] = dataclasses.field(default_factory=dict)
 
-    @property
-    def base_heldout_rmse_mm(self) -> float:
-        """The base model's held-out RMSE, mm (NaN unless `unit` is mm)."""
-        return _in_mm(self.base_heldout_rmse, self.unit)
+    base_heldout_rmse_mm = _InMm("base_heldout_rmse")
+    base_train_rmse_mm = _InMm("base_train_rmse")
+    extended_heldout_rmse_mm = _InMm("extended_heldout_rmse")
+    noise_mm = _InMm("noise")
 
-    @property
-    def base_train_rmse_mm(self) -> float:
-        """The base model's training RMSE, mm (NaN unless `unit` is mm)."""
-        return _in_mm(self.base_train_rmse, self.unit)
-
-    @property
-    def extended_heldout_rmse_mm(self) -> float:
-        """The named extension's held-out RMSE, mm (NaN unless `unit` is mm)."""
-        return _in_mm(self.extended_heldout_rmse, self.unit)
-
-    @property
-    def noise_mm(self) -> float:
-        """The elongation noise, mm (NaN unless `unit` is mm)."""
-        return _in_mm(self.noise, self.unit)
+    def extended_fit(self) -> FitResult:
+        """The fit of the extended model the diagnosis names (the named candidate's
+        fit on the training data), or the base's when no cause is named."""
+        if self.verdict == "named" and self.named_cause not in ("none", "unexplained"):
+            fit = self.candidate(self.named_cause).fit
+            if fit is not None:
+                return fit
+        return self.base_fit
 
     def candidate(self, id: str) -> Candidate:
         """The candidate of this id."""
@@ -225,7 +228,7 @@ class Diagnosis:
             "base_train_rmse": _jsonable(self.base_train_rmse),
             "extended_heldout_rmse": _jsonable(self.extended_heldout_rmse),
             "noise": _jsonable(self.noise),
-            "drives": list(self.drives),
+            "drives": [as_test_drive(d).name for d in self.drives],
             "split": self.split,
             "thresholds": {
                 "min_gain_pct": MIN_GAIN_PCT,
@@ -369,21 +372,16 @@ class Diagnosis:
         return lines
 
 
-def _scored_line(drives: tuple[str, ...], unit: str) -> str:
+def _scored_line(drives: tuple, unit: str) -> str:
     """What a diagnosis not in mm scores: one line for the summary."""
     if unit == "N":
         return "scored: the force, N (every test driven by its elongation)"
-    by_force = sum(d == "force" for d in drives)
+    by_force = sum(not as_test_drive(d).scores_force for d in drives)
     return (
         f"scored: {by_force} force-driven test(s) by their elongation, "
         f"{len(drives) - by_force} elongation-driven by their force; residuals in "
         "noise units (each divided by the noise of its test's scored channel)"
     )
-
-
-def _in_mm(value: float, unit: str) -> float:
-    """`value` (in `unit`) in mm; NaN when `unit` is not mm."""
-    return value if unit == "mm" else math.nan
 
 
 def _jsonable(x):

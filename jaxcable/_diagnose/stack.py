@@ -150,7 +150,7 @@ def stack_fitter(stack: Stack, how, base_model, **options):
 
     def fitter(active, multistart=1):
         def run(start, tests, index):
-            drives = [how.drives[i] for i in index]
+            drives = [how.drive_names[i] for i in index]
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", IdentifiabilityWarning)
                 raw = stack.fit_stacked(

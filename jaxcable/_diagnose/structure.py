@@ -10,10 +10,11 @@ from typing import Any
 
 import numpy as np
 
+from .._drive import FORCE_DRIVEN, as_test_drive
 from .._fit import as_test_list
 
 
-def _features(test, drive: str = "force") -> dict[str, np.ndarray]:
+def _features(test, drive=FORCE_DRIVEN) -> dict[str, np.ndarray]:
     """Per-sample explanatory variables of a residual, from the test's own record.
     Cycles and the loading/unloading/hold branches follow the channel the test
     imposed (`drive`): a relaxing force in a hold of the elongation is a hold."""
@@ -26,7 +27,7 @@ def _features(test, drive: str = "force") -> dict[str, np.ndarray]:
     # Time since the force last was loaded (0 while loaded): the rest time.
     last = np.maximum.accumulate(np.where(loaded, np.arange(n), -1))
     rest = np.where(last >= 0, time - time[np.maximum(last, 0)], time - time[0])
-    imposed = force if drive == "force" else np.asarray(test.elongation, float)
+    imposed = np.asarray(as_test_drive(drive).imposed_of(test), float)
     # Cycle number: upward crossings of half the peak so far.
     up = (imposed[1:] >= 0.5 * imposed.max()) & (imposed[:-1] < 0.5 * imposed.max())
     cycle = np.concatenate([[0], np.cumsum(up)])
@@ -47,7 +48,7 @@ def _features(test, drive: str = "force") -> dict[str, np.ndarray]:
     return out
 
 
-def covariates(test) -> dict[str, np.ndarray]:
+def test_covariates(test) -> dict[str, np.ndarray]:
     """A test's covariates: its temperature record (`"temperature"`) and every extra
     numeric column (`TestData.extra`, by its name), per sample."""
     out = {}
@@ -137,8 +138,8 @@ def residual_structure(
     - `residual`: model minus measured value of each test's scored channel: the
         elongation, m (`unit="mm"`), the force, N (`unit="N"`), or either divided by
         its noise (`unit="noise"`).
-    - `drives`: each test's drive (default: all `"force"`); the branches and cycles
-        follow the imposed channel.
+    - `drives`: each test's drive, a value or name (default: all force-driven); the
+        branches and cycles follow the imposed channel.
     - `unit`: the reported unit of the residuals, `"mm"`, `"N"` or `"noise"`.
 
     **Returns:**
@@ -157,7 +158,7 @@ def residual_structure(
     """
     tests = as_test_list(tests)
     if drives is None:
-        drives = ["force"] * len(tests)
+        drives = [FORCE_DRIVEN] * len(tests)
     columns: dict[str, list] = {}
     # Per covariate: its three features' samples and the residuals on its tests.
     recorded: dict[str, list] = {}
@@ -171,7 +172,7 @@ def residual_structure(
             columns.setdefault(name, [])
             columns[name].append(values[keep])
         time = np.asarray(test.time, float)
-        for name, values in covariates(test).items():
+        for name, values in test_covariates(test).items():
             rate = rate_of_change(time, values)
             recorded.setdefault(name, []).append(
                 (values[keep], rate[keep], np.abs(rate[keep]), r[keep])

@@ -1,5 +1,6 @@
 """Driving a cable model through a history: protocols, the one scan kernel and its
-drives (force, rate, elongation), the controller API and cycle analysis."""
+drives (force, rate, elongation), the drive of a measured test as a value, the
+controller API and cycle analysis."""
 
 from .analysis import (
     loop_energies as loop_energies,
@@ -12,6 +13,14 @@ from .controller import (
     LiveFiveElement as LiveFiveElement,
     controller_init as controller_init,
     controller_step as controller_step,
+)
+from .driven import (
+    ELONGATION_DRIVEN as ELONGATION_DRIVEN,
+    FORCE_DRIVEN as FORCE_DRIVEN,
+    TEST_DRIVES as TEST_DRIVES,
+    AbstractTestDrive as AbstractTestDrive,
+    ChannelDrive as ChannelDrive,
+    as_test_drive as as_test_drive,
 )
 from .drives import (
     ElongationDrive as ElongationDrive,
@@ -33,13 +42,4 @@ from .state import (
     CableState as CableState,
     Trajectory as Trajectory,
     init_state as init_state,
-)
-from .driven import (
-    ELONGATION_DRIVEN as ELONGATION_DRIVEN,
-    FORCE_DRIVEN as FORCE_DRIVEN,
-    TEST_DRIVES as TEST_DRIVES,
-    AbstractTestDrive as AbstractTestDrive,
-    ElongationDriven as ElongationDriven,
-    ForceDriven as ForceDriven,
-    as_test_drive as as_test_drive,
 )

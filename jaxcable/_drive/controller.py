@@ -14,18 +14,19 @@ import jax
 import jax.numpy as jnp
 import jax.tree_util as jtu
 import numpy as np
-from jaxtyping import Array, ArrayLike, Float, Int
+from jaxtyping import Array, ArrayLike, Float
 
 from .. import _checks
-from .._arrays import field_array
 from .._cable import CABLE_FIELDS, Cable
 from .._models import (
     PIAO_TABLE3,
     AbstractCableModel,
+    AbstractFiveElement,
     FiveElementModel,
     FiveElementState,
     ParameterSurface,
     StrainParts,
+    setting,
     table1_field,
 )
 from .._results import RESULTS
@@ -40,11 +41,11 @@ GRAVITY = 9.80665  # m/s^2, standard gravity
 # Piao's five-element model with its payload/length surface evaluated live.
 
 
-class LiveFiveElement(AbstractCableModel[FiveElementState]):
+class LiveFiveElement(AbstractFiveElement):
     r"""Piao et al.'s five-element model whose spring moduli follow the payload and
     the cable length sample by sample (Piao Eq. 5, Tables 1 and 3).
 
-    At every sample the model is rebuilt as
+    At every sample its parameters are those of
     [`jaxcable.piao_five_element`][]`(force / gravity, cable.length)`: the payload is
     the mass the cable carries, F / g (Piao measured each cable with a hanging mass,
     Section 2.2), and the length is the cable's current free length (`cable.length`,
@@ -60,39 +61,31 @@ class LiveFiveElement(AbstractCableModel[FiveElementState]):
     **Fields:**
 
     - `surface`: the E_L1 = E_UL1 surface (default [`jaxcable.PIAO_TABLE3`][]).
-    - `gravity`: g, m/s^2, to read a force as a payload mass.
+    - `gravity`: g, m/s^2, to read a force as a payload mass (> 0; a setting, not
+        fitted).
     - `E_L2`, `E_L3`, `eta_L2`, `eta_L3`: Piao Table 1 (Pa, Pa s), also used for
         unloading (E_UL2, ... are set equal: the lost Table 2).
     """
 
+    CLI_NAME = "live-five-element"
+
     surface: ParameterSurface = PIAO_TABLE3
-    gravity: Float[Array, ""] = eqx.field(converter=field_array, default=GRAVITY)
+    gravity: Float[Array, ""] = setting(GRAVITY, unit="m/s^2")
     E_L2: Float[Array, ""] = table1_field("E_L2")
     E_L3: Float[Array, ""] = table1_field("E_L3")
     eta_L2: Float[Array, ""] = table1_field("eta_L2")
     eta_L3: Float[Array, ""] = table1_field("eta_L3")
 
-    def __check_init__(self):
-        for name in ("gravity", "E_L2", "E_L3", "eta_L2", "eta_L3"):
-            value = getattr(self, name)
-            if _checks.is_concrete(value):
-                _checks.require_positive(f"LiveFiveElement.{name}", value)
+    def parameter_sets(self, force: Float[Array, ""], length: Float[Array, ""]):
+        """Both sets (E1, E2, eta2, E3, eta3): E1 = `surface(force / gravity,
+        length)`, the others Piao's Table 1."""
+        E_1 = self.surface(force / self.gravity, length)
+        both = (E_1, self.E_L2, self.eta_L2, self.E_L3, self.eta_L3)
+        return both, both
 
     def model_at(self, force: Float[Array, ""], length: Float[Array, ""]):
         """The [`jaxcable.FiveElementModel`][] for this force (N) and length (m)."""
-        E_1 = self.surface(force / self.gravity, length)
-        return FiveElementModel(
-            E_L1=E_1,
-            E_L2=self.E_L2,
-            E_L3=self.E_L3,
-            eta_L2=self.eta_L2,
-            eta_L3=self.eta_L3,
-            E_UL1=E_1,
-            E_UL2=self.E_L2,
-            E_UL3=self.E_L3,
-            eta_UL2=self.eta_L2,
-            eta_UL3=self.eta_L3,
-        )
+        return FiveElementModel.from_sets(*self.parameter_sets(force, length))
 
     def init(self, cable: Cable) -> FiveElementState:
         dtype = jnp.result_type(float, self.E_L2, cable.length)
@@ -103,20 +96,10 @@ class LiveFiveElement(AbstractCableModel[FiveElementState]):
         # (a non-positive modulus gives a non-finite or negative strain).
         return self.model_at(jnp.zeros_like(cable.length), cable.length).check(cable)
 
-    def advance(
-        self,
-        state: FiveElementState,
-        cable: Cable,
-        dt: Float[Array, ""],
-        force: Float[Array, ""],
-        direction: Int[Array, ""],
-    ) -> tuple[FiveElementState, StrainParts]:
-        model = self.model_at(force, cable.length)
-        state, parts = model.advance(state, cable, dt, force, direction)
+    def flagged(self, loading, parts: StrainParts) -> StrainParts:
         # Outside the surface's domain the strain is flagged as non-physical (NaN).
-        bad = ~(model.E_L1 > 0)
-        parts = jtu.tree_map(lambda p: jnp.where(bad, jnp.nan, p), parts)
-        return state, parts
+        bad = ~(loading[0] > 0)
+        return jtu.tree_map(lambda p: jnp.where(bad, jnp.nan, p), parts)
 
 
 # ----------------------------------------------------------------------------------
@@ -126,7 +109,7 @@ class LiveFiveElement(AbstractCableModel[FiveElementState]):
 # XLA's CPU runtime runs an executable's kernels one after the other, on the calling
 # thread, when every buffer is at most this many bytes; above it, it runs independent
 # kernels concurrently on its thread pool, which for a step this small costs more
-# than it saves (about 2x the latency on a busy 2-core machine). The packed state is
+# than it saves (benchmarks/controller.py). The packed state is
 # therefore split into chunks of at most this size.
 _SEQUENTIAL_BUFFER_BYTES = 512
 _MAX_CHUNKS = 8
@@ -139,19 +122,19 @@ def _chunk_columns(n: int, k: int, itemsize: int) -> int:
 
 
 class ControllerState(eqx.Module):
-    """The state of a set of cables inside a controller: one [`jaxcable.CableState`][]
+    """The state of a set of cables inside a controller: one [`jaxcable.states.CableState`][]
     per cable (the model's state, the last sample's time, force and strain, the first
     failure), packed into a few arrays of shape `(n, k_i)`.
 
     Packed because a real-time loop calls the jitted step from Python at kHz rates,
     and `jax.jit` pays for every array of its arguments and results at each call
-    (1-3 us each on a CPU): a `CableState` of the integrated model has 20 arrays.
+    (benchmarks/controller.py): a `CableState` of the integrated model has 20 arrays.
     The columns are split into chunks of at most 512 bytes, the size up to which
     XLA's CPU runtime executes the step's kernels sequentially on the calling thread
     (for 8 cables in float64: 3 arrays). Integer fields (the branch, the result) are
     stored as floats, exactly (the float format holds small integers exactly).
 
-    **Properties:** `cables` (the stacked [`jaxcable.CableState`][], fields of shape
+    **Properties:** `cables` (the stacked [`jaxcable.states.CableState`][], fields of shape
     `(n, ...)`), `time` (s), `forces` (N), `strain`, `result` (one
     [`jaxcable.RESULTS`][] per cable), `num_cables`.
     """
@@ -294,7 +277,7 @@ def controller_init(
 
     **Returns:**
 
-    A [`jaxcable.ControllerState`][].
+    A [`jaxcable.states.ControllerState`][].
     """
     n = _num_cables(cables)
     axis = _model_axes(model, n, per_cable)
@@ -347,7 +330,7 @@ def controller_step(
         axis of size n).
     - `cables`: a [`jaxcable.Cable`][] with `length` of shape `(n,)` (the other fields
         `(n,)` or scalars).
-    - `state`: the [`jaxcable.ControllerState`][] after the previous sample.
+    - `state`: the [`jaxcable.states.ControllerState`][] after the previous sample.
     - `time`: time of this sample, s (>= the previous sample's time).
     - `forces`: measured cable forces at this sample, N, shape `(n,)`,
         0 <= force <= `cables.breaking_load`. The force is linear between samples
@@ -361,7 +344,7 @@ def controller_step(
 
     **Returns:**
 
-    `(new_state, elongations)`: the new [`jaxcable.ControllerState`][] and each
+    `(new_state, elongations)`: the new [`jaxcable.states.ControllerState`][] and each
     cable's predicted elongation, m, shape `(n,)`.
 
     Concrete (untraced) inputs are validated at the Python boundary, raising

@@ -9,7 +9,7 @@ appear only where a drive is read or written (JSON, CSV metadata, the command li
 """
 
 import abc
-from typing import ClassVar
+from collections.abc import Callable
 
 import equinox as eqx
 import numpy as np
@@ -19,10 +19,10 @@ from .state import Trajectory
 
 
 class AbstractTestDrive(eqx.Module):
-    """The drive of a measured test (a value with no fields: instances compare equal
-    by class, hash, and are static in a jitted function).
+    """The drive of a measured test: a value with static fields only, so that drives
+    compare equal by value, hash, and are static in a jitted function.
 
-    **Class variables:**
+    **Fields:**
 
     - `name`: the drive's name in files and on the command line.
     - `imposed`: the channel that drives the model (`TestData` attribute).
@@ -32,12 +32,12 @@ class AbstractTestDrive(eqx.Module):
         channel and its factor from SI (elongations in mm).
     """
 
-    name: ClassVar[str]
-    imposed: ClassVar[str]
-    scored: ClassVar[str]
-    unit: ClassVar[str]
-    report_unit: ClassVar[str]
-    report_scale: ClassVar[float]
+    name: eqx.AbstractVar[str]
+    imposed: eqx.AbstractVar[str]
+    scored: eqx.AbstractVar[str]
+    unit: eqx.AbstractVar[str]
+    report_unit: eqx.AbstractVar[str]
+    report_scale: eqx.AbstractVar[float]
 
     def imposed_of(self, test) -> np.ndarray:
         """The imposed channel of `test` (anything with `force` and `elongation`)."""
@@ -49,8 +49,8 @@ class AbstractTestDrive(eqx.Module):
 
     @property
     def scores_force(self) -> bool:
-        """Whether the scored channel is the force."""
-        return self.scored == "force"
+        """Whether the scored channel is the force (an elongation-driven test)."""
+        return self == ELONGATION_DRIVEN
 
     @abc.abstractmethod
     def simulate(self, model, cable, time, imposed, **kwargs) -> Trajectory:
@@ -71,37 +71,30 @@ class AbstractTestDrive(eqx.Module):
         return self.name
 
 
-class ForceDriven(AbstractTestDrive):
-    """Force-driven: the force history drives the model, the elongation is scored."""
+class ChannelDrive(AbstractTestDrive):
+    """A drive by one channel, simulated by `simulator` (`simulate_force_history` or
+    `simulate_elongation_history`: same positional arguments)."""
 
-    name: ClassVar[str] = "force"
-    imposed: ClassVar[str] = "force"
-    scored: ClassVar[str] = "elongation"
-    unit: ClassVar[str] = "m"
-    report_unit: ClassVar[str] = "mm"
-    report_scale: ClassVar[float] = 1e3
-
-    def simulate(self, model, cable, time, imposed, **kwargs) -> Trajectory:
-        return simulate_force_history(model, cable, time, imposed, **kwargs)
-
-
-class ElongationDriven(AbstractTestDrive):
-    """Elongation-driven: the elongation drives the model, the solved force is
-    scored."""
-
-    name: ClassVar[str] = "elongation"
-    imposed: ClassVar[str] = "elongation"
-    scored: ClassVar[str] = "force"
-    unit: ClassVar[str] = "N"
-    report_unit: ClassVar[str] = "N"
-    report_scale: ClassVar[float] = 1.0
+    name: str = eqx.field(static=True)
+    imposed: str = eqx.field(static=True)
+    scored: str = eqx.field(static=True)
+    unit: str = eqx.field(static=True)
+    report_unit: str = eqx.field(static=True)
+    report_scale: float = eqx.field(static=True)
+    simulator: Callable[..., Trajectory] = eqx.field(static=True)
 
     def simulate(self, model, cable, time, imposed, **kwargs) -> Trajectory:
-        return simulate_elongation_history(model, cable, time, imposed, **kwargs)
+        return self.simulator(model, cable, time, imposed, **kwargs)
 
 
-FORCE_DRIVEN = ForceDriven()
-ELONGATION_DRIVEN = ElongationDriven()
+# Force-driven: the force history drives the model, the elongation is scored.
+FORCE_DRIVEN = ChannelDrive(
+    "force", "force", "elongation", "m", "mm", 1e3, simulate_force_history
+)
+# Elongation-driven: the elongation drives the model, the solved force is scored.
+ELONGATION_DRIVEN = ChannelDrive(
+    "elongation", "elongation", "force", "N", "N", 1.0, simulate_elongation_history
+)
 TEST_DRIVES: dict[str, AbstractTestDrive] = {
     d.name: d for d in (FORCE_DRIVEN, ELONGATION_DRIVEN)
 }

@@ -121,10 +121,16 @@ class RateSample(AbstractSample):
     continues: Bool[Array, "*samples"]
 
 
-class _TimeProblem(eqx.Module):
+class _SampleProblem(eqx.Module):
+    """What the residual of one sample's solve needs: the model, the cable and the
+    state before the sample."""
+
     model: AbstractCableModel
     cable: Cable
     state: CableState
+
+
+class _TimeProblem(_SampleProblem):
     force: Float[Array, ""]
     direction: Int[Array, ""]
     duration: Float[Array, ""]
@@ -270,10 +276,7 @@ class ElongationSample(AbstractSample):
     mask: Bool[Array, "*samples"]
 
 
-class _ForceProblem(eqx.Module):
-    model: AbstractCableModel
-    cable: Cable
-    state: CableState
+class _ForceProblem(_SampleProblem):
     dt: Float[Array, ""]
     target: Float[Array, ""]
     direction: Int[Array, ""]

@@ -59,7 +59,7 @@ class AbstractDrive(eqx.Module):
         state: CableState,
         sample: AbstractSample,
     ) -> tuple[CableState, StrainParts]:
-        """Advance the cable by one sample: the new [`jaxcable.CableState`][] and the
+        """Advance the cable by one sample: the new [`jaxcable.states.CableState`][] and the
         [`jaxcable.StrainParts`][] of the sample (both unchanged by a padding sample,
         `sample.mask` False)."""
 
@@ -83,7 +83,7 @@ def _scan(body, carry: CableState, samples: AbstractSample, checkpoint: int | No
     # recomputes the rest of the step in the backward pass (no effect on a forward
     # pass). Storing every intermediate of every sample instead (one array of the
     # history's length each, ~100 of them) makes the gradient of a batch memory-bound:
-    # measured 2.3x slower at 1024 cables x 2000 samples (benchmarks/kernel.py).
+    # measured slower on a large batch (benchmarks/kernel.py).
     body = jax.checkpoint(body, policy=_SAVE_SOLUTION)
     if checkpoint is None:
         return jax.lax.scan(body, carry, samples)

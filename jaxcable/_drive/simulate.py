@@ -49,13 +49,13 @@ def step(
 
     - `model`: any [`jaxcable.AbstractCableModel`][].
     - `cable`: the [`jaxcable.Cable`][].
-    - `state`: the [`jaxcable.CableState`][] after the previous sample.
+    - `state`: the [`jaxcable.states.CableState`][] after the previous sample.
     - `time`: time of this sample, s (>= `state.time`).
     - `force`: force of this sample, N.
 
     **Returns:**
 
-    `(new_state, parts)`: the new [`jaxcable.CableState`][] and the
+    `(new_state, parts)`: the new [`jaxcable.states.CableState`][] and the
     [`jaxcable.StrainParts`][] of this sample (strain = `parts.total`).
     """
     time = jnp.asarray(time, state.time.dtype)

@@ -1,5 +1,5 @@
 """The state of one simulated cable and what every drive does with it at each sample:
-[`jaxcable.CableState`][], [`jaxcable.init_state`][], the commit of a sample (the
+[`jaxcable.states.CableState`][], [`jaxcable.init_state`][], the commit of a sample (the
 first failure kept, padding samples skipped) and the [`jaxcable.Trajectory`][] that a
 simulation returns."""
 
@@ -85,7 +85,7 @@ def init_state(
 
     **Returns:**
 
-    A [`jaxcable.CableState`][].
+    A [`jaxcable.states.CableState`][].
     """
     model_state = model.init(cable)
     dtype = jnp.result_type(float, cable.length)
@@ -199,7 +199,7 @@ def commit(
 
     **Arguments:**
 
-    - `state`: the [`jaxcable.CableState`][] before the sample.
+    - `state`: the [`jaxcable.states.CableState`][] before the sample.
     - `cable`: the [`jaxcable.Cable`][], whose `breaking_strain` the strain is
         checked against.
     - `model_state`, `parts`: the model's state and strain after the sample.

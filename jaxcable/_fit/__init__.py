@@ -6,10 +6,9 @@ from .data import (
     test_id as test_id,
 )
 from .exported import cached_fit_kernels as cached_fit_kernels
-from .fit import fit as fit
+from .fit import fit as fit, make_loss as make_loss
 from .parameters import declared_parameters as declared_parameters, field_at as field_at
 from .problem import (
-    make_loss as make_loss,
     make_problem as make_problem,
     residuals as residuals,
 )

@@ -12,6 +12,7 @@ from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .. import _checks
 from .._cable import ZERO_CELSIUS, Cable
+from .._drive import ELONGATION_DRIVEN, FORCE_DRIVEN, AbstractTestDrive
 from .._io import ControlDetection, TestData, force_noise, resolve_control
 
 
@@ -35,9 +36,10 @@ class PaddedTests(eqx.Module):
         unit (0 where `pad_tests` was given no `covariate`); the fit sets
         `Cable.covariate` from it per sample.
     - `cable`: a batched [`jaxcable.Cable`][], one per test.
-    - `drive`: each test's drive, `"force"` (its force history drives the model, the
-        elongation is scored) or `"elongation"` (the elongation drives, the solved
-        force is scored).
+    - `drive`: each test's drive, [`jaxcable.FORCE_DRIVEN`][] (its force history
+        drives the model, the elongation is scored) or
+        [`jaxcable.ELONGATION_DRIVEN`][] (the elongation drives, the solved force is
+        scored).
     - `scale`: each test's residual unit: 1 when every test is scored in the same
         channel (residuals in m, or N); in a fit mixing both, the noise standard
         deviation of the test's scored channel (m or N), so that residuals are
@@ -52,7 +54,7 @@ class PaddedTests(eqx.Module):
     temperature: Float[Array, "tests samples"]
     covariate: Float[Array, "tests samples"]
     cable: Cable
-    drive: tuple[str, ...] = eqx.field(static=True)
+    drive: tuple[AbstractTestDrive, ...] = eqx.field(static=True)
     scale: Float[Array, " tests"]
 
     @property
@@ -62,22 +64,22 @@ class PaddedTests(eqx.Module):
     @property
     def by_force(self) -> np.ndarray:
         """Indices of the force-driven tests."""
-        return np.array([i for i, d in enumerate(self.drive) if d == "force"], int)
+        return np.array([i for i, d in enumerate(self.drive) if d == FORCE_DRIVEN], int)
 
     @property
     def by_elongation(self) -> np.ndarray:
         """Indices of the elongation-driven tests."""
-        return np.array([i for i, d in enumerate(self.drive) if d != "force"], int)
+        return np.array([i for i, d in enumerate(self.drive) if d != FORCE_DRIVEN], int)
 
     @property
     def measured(self) -> Float[ArrayLike, "tests samples"]:
         """The scored channel of each test (elongation m, or force N), 0 where its
-        weight is 0: computed by NumPy on the host unless traced (eager JAX
-        operations each load a compiled program, ~10-25 ms in a fresh process)."""
+        weight is 0: computed by NumPy on the host unless traced (each eager JAX
+        operation loads a compiled program of its own)."""
         arrays = (self.force, self.elongation, self.weight)
         xp = np if _checks.is_concrete(*arrays) else jnp
         force, elongation, weight = (xp.asarray(x) for x in arrays)
-        scored_force = np.array([d != "force" for d in self.drive])[:, None]
+        scored_force = np.array([d.scores_force for d in self.drive])[:, None]
         return xp.where(scored_force, force, elongation) * weight
 
     @property
@@ -85,7 +87,7 @@ class PaddedTests(eqx.Module):
         """The residual unit of each test: `"m"`, `"N"` or `"1"` (mixed fits)."""
         if len(set(self.drive)) > 1:
             return ("1",) * len(self.drive)
-        return tuple("m" if d == "force" else "N" for d in self.drive)
+        return tuple(d.unit for d in self.drive)
 
 
 def test_id(test, index: int) -> str:
@@ -138,7 +140,7 @@ class _Row:
     temperature: np.ndarray  # K
     covariate: np.ndarray  # the unit of the covariate column (0 without one)
     cable: Cable
-    drive: str
+    drive: AbstractTestDrive
 
 
 def _required_fields(test, where: str) -> None:
@@ -196,7 +198,9 @@ def _covariate(test, where: str, time: np.ndarray, name: str | None) -> np.ndarr
     return values
 
 
-def _checked_row(test, index: int, drive: str, covariate: str | None = None) -> _Row:
+def _checked_row(
+    test, index: int, drive: AbstractTestDrive, covariate: str | None = None
+) -> _Row:
     """Test `index` checked (errors name `tests[index]` and the field); an
     elongation-driven test needs its elongation at every sample."""
     where = f"tests[{index}] ({test_id(test, index)})"
@@ -216,7 +220,8 @@ def _checked_row(test, index: int, drive: str, covariate: str | None = None) -> 
     mask = _mask(test, where, time.shape)
     _checks.require_finite(f"{where}.time", time)
     _checks.require_finite(f"{where}.force", force)
-    driven = elongation if drive == "elongation" else elongation[mask]
+    by_elongation = drive == ELONGATION_DRIVEN
+    driven = elongation if by_elongation else elongation[mask]
     _checks.require_finite(f"{where}.elongation", driven)
     _checks.require_increasing(f"{where}.time", time)
     _checks.require_positive(f"{where}.force", force, allow_zero=True)
@@ -225,9 +230,7 @@ def _checked_row(test, index: int, drive: str, covariate: str | None = None) -> 
     return _Row(
         time=time,
         force=force,
-        elongation=elongation
-        if drive == "elongation"
-        else np.where(mask, elongation, 0.0),
+        elongation=elongation if by_elongation else np.where(mask, elongation, 0.0),
         mask=mask,
         temperature=_temperature(test, where, time, cable),
         covariate=_covariate(test, where, time, covariate),
@@ -243,15 +246,20 @@ def resolve_drives(tests, drive=None) -> list[ControlDetection]:
 
     - `tests`: one test or a sequence of tests.
     - `drive`: `"auto"` or `None` (each test's `metadata['control']`, else detected
-        from its data by [`jaxcable.detect_control`][]), `"force"`, `"elongation"`,
-        or a sequence of these, one per test.
+        from its data by [`jaxcable.detect_control`][]), a drive
+        ([`jaxcable.FORCE_DRIVEN`][], [`jaxcable.ELONGATION_DRIVEN`][]) or its name
+        (`"force"`, `"elongation"`), or a sequence of these, one per test.
+
+    **Returns:**
+
+    One [`jaxcable.ControlDetection`][] per test; its `drive` is the drive value.
 
     **Raises:**
 
     `ValueError` naming `drive`: an unknown name, or a sequence of another length.
     """
     tests = as_test_list(tests)
-    if drive is None or isinstance(drive, str):
+    if drive is None or isinstance(drive, (str, AbstractTestDrive)):
         drives = [drive] * len(tests)
     else:
         drives = list(drive)
@@ -269,7 +277,7 @@ def _scales(rows: list[_Row]) -> np.ndarray:
         return np.ones(len(rows))
     out = []
     for r in rows:
-        scored = (r.force if r.drive == "elongation" else r.elongation)[r.mask]
+        scored = r.drive.scored_of(r)[r.mask]
         peak = float(np.max(np.abs(scored)))
         # Quantised or noise-free records have no measurable noise: 1e-4 of the
         # peak stands in, as a resolution.
@@ -311,7 +319,7 @@ def pad_tests(
     no `covariate` column or a non-finite one.
     """
     tests = as_test_list(tests)
-    drives = [d.control for d in resolve_drives(tests, drive)]
+    drives = [d.drive for d in resolve_drives(tests, drive)]
     rows = [
         _checked_row(t, i, d, covariate) for i, (t, d) in enumerate(zip(tests, drives))
     ]
@@ -340,11 +348,10 @@ def pad_tests(
 
     def put(x, dtype=dtype):
         # Converted by NumPy, then transferred: `jnp.asarray` of a NumPy array runs
-        # a small compiled program per shape and dtype (25 ms each in a fresh
-        # process, measured), `device_put` only copies.
+        # a small compiled program per shape and dtype, `device_put` only copies.
         return jax.device_put(np.asarray(x, dtype))
 
-    # One transfer per field (not per test): host overhead counts in a fit of ~50 ms.
+    # One transfer per field (not per test): host overhead counts in a small fit.
     cable = jax.tree_util.tree_map(
         lambda *xs: put(np.stack([np.asarray(x) for x in xs])),
         *(r.cable for r in rows),

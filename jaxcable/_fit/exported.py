@@ -1,8 +1,8 @@
 """The fit kernel kept on disk as a traced and lowered program (`jax.export`).
 
 JAX's persistent compilation cache saves a later process the XLA compilation of the
-fit kernel, not its tracing and lowering: through the solver's loop and the
-simulation's scans that took 1.5-2 s, most of a warm `jaxcable fit`. Here the kernel
+fit kernel, not its tracing and lowering through the solver's loop and the
+simulation's scans, which is most of a warm `jaxcable fit`. Here the kernel
 is exported once per static configuration (the model's structure and static fields,
 the layout of the fitted parameters, the padded data's shapes and dtypes, the
 solver, the number of starts and steps, the Jacobian's mode, the versions of

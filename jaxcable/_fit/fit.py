@@ -11,17 +11,17 @@ Jacobian at the optimum.
 
 import math
 import warnings
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 
 import equinox as eqx
 import jax
 import jax.random as jr
 import numpy as np
 import optimistix as optx
-from jaxtyping import PRNGKeyArray
+from jaxtyping import Array, Float, PRNGKeyArray
 
-from .._drive import simulate_elongation_history, simulate_force_history
-from .._models import AbstractCableModel
+from .._drive import FORCE_DRIVEN
+from .._models import MODELS, AbstractCableModel, transform_table
 from .._results import RESULTS
 from .data import (
     as_test_list,
@@ -32,8 +32,9 @@ from .parameters import test_slice
 from .problem import (
     Problem,
     make_problem,
+    require_enough_samples,
 )
-from .result import FitResult
+from .result import FitResult, concrete_result
 from .solver import KernelOut, LevenbergMarquardt
 from .statistics import (
     IdentifiabilityWarning,
@@ -71,13 +72,9 @@ def _require_valid_start(out: KernelOut, tests: list, problem: Problem) -> None:
     i = int(bad[0])
     test, drive = tests[i], problem.data.drive[i]
     model = eqx.combine(problem.base, problem.static)
-    cable = test.cable()
-    if drive == "force":
-        traj = simulate_force_history(model, cable, test.time, test.force, throw=False)
-    else:
-        traj = simulate_elongation_history(
-            model, cable, test.time, test.elongation, throw=False
-        )
+    traj = drive.simulate(
+        model, test.cable(), test.time, drive.imposed_of(test), throw=False
+    )
     reason = str(RESULTS[traj.result]) or (
         "the simulation is not finite or a parameter is outside its domain for this "
         "cable (e.g. Park's t_r2 = lambda1 (L0/v)^2 - lambda2 <= 0)"
@@ -89,15 +86,41 @@ def _require_valid_start(out: KernelOut, tests: list, problem: Problem) -> None:
     )
 
 
+def run_kernel(
+    problem: Problem,
+    u0,
+    key: PRNGKeyArray | None,
+    solver: optx.AbstractGaussNewton,
+    max_steps: int,
+    jac: str,
+    multistart: int,
+    spread: float,
+    test_list: list,
+) -> KernelOut:
+    """The fit kernel run on `problem` from `u0` (the arguments as in `fit_kernel`;
+    `key` None: `jax.random.key(0)`), after which the user's start must have
+    simulated on every test of `test_list`."""
+    if key is None:
+        key = jr.key(0)
+    # `fit_kernel`, or the command line's exported programs (`cached_fit_kernels`).
+    kernel = current_fit_kernel()
+    out = kernel(problem, u0, key, solver, max_steps, jac, multistart, spread)
+    _require_valid_start(out, test_list, problem)
+    return out
+
+
 def _outcome(
     out: KernelOut, labels: tuple[str, ...], n: int, throw: bool
-) -> tuple[bool, str, float, Statistics]:
-    """`(converged, message, ssr, statistics)` of the chosen start; with `throw`, a
-    `RuntimeError` when it failed or did not converge."""
+) -> tuple[RESULTS, float, Statistics]:
+    """`(result, ssr, statistics)` of the chosen start: `RESULTS.successful`, the
+    solver's result (optimistix's, promoted), or `RESULTS.every_start_failed`; with
+    `throw`, a `RuntimeError` when it failed or did not converge."""
     best = int(out.best)
     # Indexed on the host: an index of a device array is a program of its own.
     converged = bool(np.asarray(out.converged)[best])
-    message = "" if converged else str(optx.RESULTS[out.best_result])
+    solver_result = RESULTS.promote(out.best_result)
+    message = "" if converged else str(RESULTS[solver_result])
+    result = RESULTS.successful if converged else concrete_result(solver_result)
     ssr = float(np.asarray(out.ssr)[best])
     if math.isfinite(ssr):
         stats = statistics(out.gram, out.natural_jacobian, out.natural, ssr, n, labels)
@@ -108,6 +131,7 @@ def _outcome(
                 f"jaxcable.fit: {message}. Try other start values or fewer fitted "
                 "parameters."
             )
+        result = RESULTS.every_start_failed
         stats = Statistics.undefined(len(labels))
     if not converged and throw:
         diagnosis = (
@@ -119,7 +143,7 @@ def _outcome(
             "other start values, fewer fitted parameters, or throw=False to inspect "
             "the result."
         )
-    return converged, message, ssr, stats
+    return result, ssr, stats
 
 
 def _fitted_models(
@@ -145,7 +169,7 @@ def _rmse(
     rmse = np.sqrt((r**2).sum(axis=1) / num_samples)
     measured = np.asarray(data.measured, float)
     peak = np.max(np.abs(measured), axis=1)
-    by_force = np.array([d == "force" for d in data.drive])
+    by_force = np.array([d == FORCE_DRIVEN for d in data.drive])
     rmse_mm = np.where(by_force, 1e3 * rmse, np.nan)
     rmse_n = np.where(by_force, np.nan, rmse)
     return rmse_mm, rmse_n, 100 * rmse / np.where(peak > 0, peak, np.nan)
@@ -188,21 +212,17 @@ def fit(
     **Method.** Levenberg-Marquardt (optimistix's damped Newton descent in a trust
     region) on unconstrained parameters u. The Jacobian of the residuals is taken
     through the whole scan, by forward mode: the p parameter tangents are carried
-    through one scan together, about 1.5-2.5 forward simulations' cost for 6-16
-    parameters. (The mode is chosen by size, tangents p against cotangents n; since a
+    through one scan together, a small multiple of one forward simulation's cost.
+    (The mode is chosen by size, tangents p against cotangents n; since a
     least-squares fit needs more samples than parameters, reverse mode, one cotangent
-    per residual and 3-6x slower on the benchmark, is never chosen.) The residuals are divided by sqrt(1e-4 sum(e_measured^2))
-    inside the solver, which leaves the optimum unchanged and sets the initial
-    damping to 1e-4 of the problem's largest curvature (nearly a Gauss-Newton step).
-    Reparameterisation x = f(u):
+    per residual, is never chosen.) The residuals are divided by
+    sqrt(1e-4 sum(e_measured^2)) inside the solver, which leaves the optimum
+    unchanged and sets the initial damping to 1e-4 of the problem's largest
+    curvature (nearly a Gauss-Newton step).
+    Reparameterisation x = f(u), as each model declares it (in parentheses: not
+    fitted by default; an extension declares its own):
 
-    | model | parameter | x = f(u) |
-    | --- | --- | --- |
-    | all | positive parameters (moduli Pa, viscosities Pa s, times s, Park's beta and gamma, ...) | exp(u) |
-    | `IntegratedModel` | `lambda2` (Park Eq. 8, either sign) | s u, s = abs(start) |
-    | `BoucWenModel` | `gamma` (abs(gamma) <= beta) | beta tanh(u) |
-    | `BoucWenModel` | `n` (n >= 1) | 1 + exp(u) |
-    | other models | a parameter starting > 0 / <= 0 | exp(u) / s u |
+    {TRANSFORMS}
 
     (`transforms` overrides with `'log'` or `'linear'`.) Constraints the
     reparameterisation does not enforce (Park's t_r2 > 0 and E1c A above the breaking
@@ -264,7 +284,8 @@ def fit(
         that a fit is reproducible unless asked otherwise.
     - `throw`: raise `RuntimeError` when no start converged (default), with the
         solver's message and the identifiability warnings; with `False` return the
-        best start with `converged=False` and the solver's `message`.
+        best start, its `result` the solver's ([`jaxcable.RESULTS`][]: optimistix's
+        members, e.g. `max_steps_reached`, or `every_start_failed`).
     - `drive`: `"auto"` (default; see Drives above), `"force"`, `"elongation"`, or a
         sequence of these, one per test.
     - `covariate`: the name of an extra column of every test (`test.extra[name]`)
@@ -289,23 +310,24 @@ def fit(
         model, test_list, fit, per_test, transforms, drive, covariate
     )
     layout = problem.layout
-    num_samples = np.asarray(problem.data.weight).sum(axis=1).astype(int)
-    n, p = int(num_samples.sum()), layout.size
-    if n <= p:
-        raise ValueError(
-            f"`tests` have {n} fitted samples for {p} parameters; a least-squares fit "
-            "needs more samples than parameters."
-        )
-    if key is None:
-        key = jr.key(0)
+    p = layout.size
+    n = require_enough_samples(problem.data, p)
     jac = "fwd" if p <= n else "bwd"
-    # `fit_kernel`, or the command line's exported programs (`cached_fit_kernels`).
-    kernel = current_fit_kernel()
-    out = kernel(problem, u_user, key, solver, max_steps, jac, multistart, spread)
-    _require_valid_start(out, test_list, problem)
+    out = run_kernel(
+        problem, u_user, key, solver, max_steps, jac, multistart, spread, test_list
+    )
     units = tuple(u for u, s in zip(layout.units, layout.sizes) for _ in range(s))
     per = tuple(n for n, q in zip(layout.names, layout.per_test) if q)
     return fit_result(out, problem, test_list, layout.labels, units, per, throw)
+
+
+# The table of reparameterisations is derived from the models' declarations
+# (docstrings are None under `python -OO`).
+if fit.__doc__:
+    fit.__doc__ = fit.__doc__.replace(
+        "{TRANSFORMS}",
+        transform_table(e.cls for e in MODELS).replace("\n", "\n    "),
+    )
 
 
 def fit_result(
@@ -323,7 +345,7 @@ def fit_result(
     issued."""
     num_samples = np.asarray(problem.data.weight).sum(axis=1).astype(int)
     n = int(num_samples.sum())
-    converged, message, ssr, stats = _outcome(out, labels, n, throw)
+    result, ssr, stats = _outcome(out, labels, n, throw)
     for text in stats.warnings:
         warnings.warn(text, IdentifiabilityWarning, stacklevel=3)
     fitted_model, models = _fitted_models(out, problem)
@@ -347,9 +369,69 @@ def fit_result(
         test_ids=tuple(test_id(t, i) for i, t in enumerate(test_list)),
         num_samples=num_samples,
         warnings=stats.warnings,
-        converged=converged,
-        message=message,
+        result=result,
         num_steps=int(np.asarray(out.steps)[int(out.best)]),
         start_losses=np.asarray(out.ssr, float),
         per_test=per_test,
     )
+
+
+def make_loss(
+    model: AbstractCableModel,
+    tests,
+    *,
+    fit: Sequence[str] | None = None,
+    per_test: Sequence[str] | None = None,
+    transforms: Mapping[str, str] | None = None,
+    drive="auto",
+) -> tuple[
+    Callable[[dict[str, Array]], Float[Array, ""]],
+    dict[str, Array],
+    Callable[[dict[str, Array]], AbstractCableModel],
+]:
+    """The fit's loss as a pure function of unconstrained parameters, for your own
+    optimiser (optax, ...).
+
+    The same problem as [`jaxcable.fit`][] solves: the sum of squared residuals
+    (model minus measured elongation, m^2, or force, N^2, by each test's drive;
+    masked samples excluded) over all tests,
+    as a function of a dict of unconstrained parameters (log of the positive ones;
+    see [`jaxcable.fit`][] for each model's reparameterisation).
+
+    ```python
+    loss, params, to_model = jc.make_loss(jc.BurgersModel(), tests)  # log-parameters
+    opt = optax.adam(1e-2); state = opt.init(params)
+    step = jax.jit(lambda p, s: opt.update(jax.grad(loss)(p), s))
+    for _ in range(2000):
+        updates, state = step(params, state); params = optax.apply_updates(params, updates)
+    fitted = to_model(params)
+    ```
+
+    ([`jaxcable.fit`][]'s Levenberg-Marquardt on the same problem typically needs
+    10-20 steps, and reports standard errors.)
+
+    **Arguments:**
+
+    - `model`, `tests`, `fit`, `per_test`, `transforms`, `drive`: as in
+        [`jaxcable.fit`][].
+
+    **Returns:**
+
+    `(loss, params, to_model)`: `loss(params)`, the sum of squared residuals, m^2
+    (jittable, differentiable; NaN where a simulation fails); `params`, the start, a
+    dict {name: unconstrained value}, a scalar for shared and a `(tests,)` array for
+    per-test parameters; `to_model(params)`, the model with those values (per-test
+    fields as `(tests,)` arrays).
+    """
+    problem, u0 = make_problem(
+        model, as_test_list(tests), fit, per_test, transforms, drive
+    )
+    layout = problem.layout
+
+    def loss(params: dict[str, Array]) -> Float[Array, ""]:
+        return problem.ssr(layout.join(params))
+
+    def to_model(params: dict[str, Array]) -> AbstractCableModel:
+        return eqx.combine(problem.params(layout.join(params)), problem.static)
+
+    return loss, layout.split(u0), to_model

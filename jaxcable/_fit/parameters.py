@@ -2,7 +2,7 @@
 vector u and the reparameterisation x = f(u) of each parameter.
 
 How each field is fitted (transform, unit, stiffness power) is read from the model
-registry (`parameter_info`); this module names the fields of nested models by their
+classes' declarations (`parameter_info`); this module names the fields of nested models by their
 path (`base.E1`) and maps between u and natural values.
 """
 
@@ -77,8 +77,18 @@ def declared_parameters(
 
 def test_slice(tree: PyTree, index: int) -> PyTree:
     """Test `index`'s values of a tree with per-test parameters: entry `index` of every
-    leaf of shape `(tests,)`, every other leaf as it is."""
-    return jax.tree_util.tree_map(lambda x: x[index] if np.ndim(x) == 1 else x, tree)
+    leaf of shape `(tests,)`, every other leaf as it is. A module inside a model that
+    is no model itself (a parameter surface) is kept whole: its leaves are not
+    parameters."""
+
+    def part(x) -> bool:
+        return isinstance(x, eqx.Module) and not isinstance(x, AbstractCableModel)
+
+    return jax.tree_util.tree_map(
+        lambda x: x if part(x) else x[index] if np.ndim(x) == 1 else x,
+        tree,
+        is_leaf=part,
+    )
 
 
 @dataclasses.dataclass(frozen=True)

@@ -3,7 +3,7 @@ function of the model's parameters and of the unconstrained vector u.
 """
 
 import dataclasses
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 
 import equinox as eqx
 import jax
@@ -23,7 +23,7 @@ from .._drive import (
 )
 from .._models import AbstractCableModel, ParameterInfo, identifiable
 from .._results import RESULTS
-from .data import PaddedTests, as_test_list, pad_tests, test_id
+from .data import PaddedTests, pad_tests, test_id
 from .parameters import (
     Layout,
     bound_of,
@@ -59,7 +59,7 @@ def _elongation_history(
     cable at `time[0]`, masked samples leaving the state unchanged), keeping only the
     elongation: inside the solver's loop, XLA on CPU copies a scan's stacked outputs
     at every step, and a full `Trajectory` (every state field, times the Jacobian's
-    tangents) made each Jacobian about 20x slower than this. The cable's temperature
+    tangents) made each Jacobian many times slower than this. The cable's temperature
     is the sample's (K), for temperature-dependent models, and so is its covariate
     (for covariate-dependent ones). The forces are used as
     measured (no deadband), so the fit's model is the one every other entry point
@@ -277,6 +277,40 @@ class Problem(eqx.Module):
         return jnp.sum(self.residuals(u) ** 2)
 
 
+def build_problem(
+    layout: Layout, base: PyTree, static: PyTree, scales, data: PaddedTests, **subset
+) -> Problem:
+    """A `Problem` of the model split into `base` (its inexact-array fields) and
+    `static`, with the scales of the linear transforms `scales` (converted to the
+    default float dtype); `subset`: `select`, `fixed` and `free` for a problem that
+    solves a subset of the layout."""
+    return Problem(
+        layout=layout,
+        static=static,
+        base=base,
+        scales=jnp.asarray(scales, jnp.result_type(float)),
+        data=data,
+        **subset,
+    )
+
+
+def require_enough_samples(data: PaddedTests, num_params: int) -> int:
+    """The number of fitted samples of `data`, after checking that it exceeds the
+    number of fitted parameters.
+
+    **Raises:**
+
+    `ValueError` naming `tests` otherwise.
+    """
+    n = int(np.asarray(data.weight).sum())
+    if n <= num_params:
+        raise ValueError(
+            f"`tests` have {n} fitted samples for {num_params} parameters; a "
+            "least-squares fit needs more samples than parameters."
+        )
+    return n
+
+
 @eqx.filter_jit
 def _check_model(model: AbstractCableModel, cables: Cable) -> Bool[Array, " tests"]:
     return jax.vmap(lambda c: model.check(c) == RESULTS.successful)(cables)
@@ -426,74 +460,6 @@ def make_problem(
         num_tests=data.num_tests,
     )
     scales, start = _start(model, layout)
-    dtype = jnp.result_type(float)
     base, static = eqx.partition(model, eqx.is_inexact_array)
-    problem = Problem(
-        layout=layout,
-        static=static,
-        base=base,
-        scales=jnp.asarray(scales, dtype),
-        data=data,
-    )
-    return problem, jnp.asarray(start, dtype)
-
-
-def make_loss(
-    model: AbstractCableModel,
-    tests,
-    *,
-    fit: Sequence[str] | None = None,
-    per_test: Sequence[str] | None = None,
-    transforms: Mapping[str, str] | None = None,
-    drive="auto",
-) -> tuple[
-    Callable[[dict[str, Array]], Float[Array, ""]],
-    dict[str, Array],
-    Callable[[dict[str, Array]], AbstractCableModel],
-]:
-    """The fit's loss as a pure function of unconstrained parameters, for your own
-    optimiser (optax, ...).
-
-    The same problem as [`jaxcable.fit`][] solves: the sum of squared residuals
-    (model minus measured elongation, m^2, or force, N^2, by each test's drive;
-    masked samples excluded) over all tests,
-    as a function of a dict of unconstrained parameters (log of the positive ones;
-    see [`jaxcable.fit`][] for each model's reparameterisation).
-
-    ```python
-    loss, params, to_model = jc.make_loss(jc.BurgersModel(), tests)  # log-parameters
-    opt = optax.adam(1e-2); state = opt.init(params)
-    step = jax.jit(lambda p, s: opt.update(jax.grad(loss)(p), s))
-    for _ in range(2000):
-        updates, state = step(params, state); params = optax.apply_updates(params, updates)
-    fitted = to_model(params)
-    ```
-
-    ([`jaxcable.fit`][]'s Levenberg-Marquardt on the same problem typically needs
-    10-20 steps, and reports standard errors.)
-
-    **Arguments:**
-
-    - `model`, `tests`, `fit`, `per_test`, `transforms`, `drive`: as in
-        [`jaxcable.fit`][].
-
-    **Returns:**
-
-    `(loss, params, to_model)`: `loss(params)`, the sum of squared residuals, m^2
-    (jittable, differentiable; NaN where a simulation fails); `params`, the start, a
-    dict {name: unconstrained value}, a scalar for shared and a `(tests,)` array for
-    per-test parameters; `to_model(params)`, the model with those values (per-test
-    fields as `(tests,)` arrays).
-    """
-    problem, u0 = make_problem(
-        model, as_test_list(tests), fit, per_test, transforms, drive
-    )
-    layout = problem.layout
-
-    def loss(params: dict[str, Array]) -> Float[Array, ""]:
-        return problem.ssr(layout.join(params))
-
-    def to_model(params: dict[str, Array]) -> AbstractCableModel:
-        return eqx.combine(problem.params(layout.join(params)), problem.static)
-
-    return loss, layout.split(u0), to_model
+    problem = build_problem(layout, base, static, scales, data)
+    return problem, jnp.asarray(start, jnp.result_type(float))

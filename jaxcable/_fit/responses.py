@@ -42,16 +42,16 @@ def model_responses(
     if drive is None:
         drives = getattr(result, "drives", ())
         drive = list(drives) if drives else "auto"
-    drives = [d.control for d in resolve_drives(tests, drive)]
+    drives = [d.drive for d in resolve_drives(tests, drive)]
     # Every sample weighted, so that the residual (model - measured) is returned at
-    # masked samples too; their measured value only needs to be finite.
+    # masked samples too; their measured (scored) value only needs to be finite.
     unmasked = [
         dataclasses.replace(
             t,
             mask=None,
-            elongation=np.nan_to_num(np.asarray(t.elongation, float))
-            if d == "force"
-            else t.elongation,
+            elongation=t.elongation
+            if d.scores_force
+            else np.nan_to_num(np.asarray(t.elongation, float)),
             force=np.nan_to_num(np.asarray(t.force, float)),
         )
         for t, d in zip(tests, drives)
@@ -64,6 +64,6 @@ def model_responses(
         * np.asarray(padded.scale)[:, None]
     )
     return [
-        r[i, : t.num_samples] + (t.elongation if d == "force" else t.force)
+        r[i, : t.num_samples] + d.scored_of(t)
         for i, (t, d) in enumerate(zip(unmasked, drives))
     ]

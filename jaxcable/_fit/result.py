@@ -10,9 +10,11 @@ from typing import Any
 
 import numpy as np
 
+from .._drive import FORCE_DRIVEN, AbstractTestDrive, as_test_drive
 from .._files import write_text_atomic
 from .._io import parse_json, read_json
 from .._models import AbstractCableModel
+from .._results import RESULTS
 from .parameters import test_slice
 from .serialize import model_document, model_from_document, unknown_model
 
@@ -25,6 +27,33 @@ def _json_number(x: float) -> float | None:
 def _from_json_number(x) -> float:
     """The inverse of `_json_number`: NaN for null."""
     return math.nan if x is None else float(x)
+
+
+def _result_name(result: RESULTS) -> str:
+    """The name of a [`jaxcable.RESULTS`][] member, as PARAMS.json writes it."""
+    index = int(np.asarray(result._value))
+    # equinox's enumerations keep their members by name.
+    names = RESULTS._name_to_item.items()
+    return next(name for name, item in names if int(item._value) == index)
+
+
+def concrete_result(result: RESULTS) -> RESULTS:
+    """The member itself of a concrete result (whose value may be a device array)."""
+    return RESULTS._name_to_item[_result_name(result)]
+
+
+def _read_result(doc: Mapping[str, Any]) -> RESULTS:
+    """The fit's result in a PARAMS.json: its `result` name; in a file written before
+    results, the member whose message is the file's `message`."""
+    if "result" in doc:
+        return RESULTS._name_to_item[doc["result"]]
+    if doc["converged"]:
+        return RESULTS.successful
+    message = doc.get("message", "")
+    if message.startswith("every start failed"):
+        return RESULTS.every_start_failed
+    by_message = {str(RESULTS[item]): item for item in RESULTS._name_to_item.values()}
+    return by_message[message]
 
 
 def _json_matrix(matrix: np.ndarray) -> list[list[float | None]]:
@@ -63,15 +92,17 @@ class FitResult:
     - `test_ids`: each test's `metadata['id']`, file name or `test i`.
     - `num_samples`: fitted (unmasked) samples per test.
     - `warnings`: the identifiability warnings (also issued with `warnings.warn`).
-    - `converged`: whether the chosen start's solver run succeeded.
-    - `message`: the solver's message when it did not ("" otherwise).
+    - `result`: a [`jaxcable.RESULTS`][]: `successful` when the chosen start's
+        solver run converged, else the solver's result (optimistix's members, e.g.
+        `max_steps_reached`) or `every_start_failed`.
     - `num_steps`: solver steps of the chosen start.
     - `start_losses`: SSR reached from each start (m^2; inf where it failed).
     - `per_test`: the names fitted per test.
     - `rmse_N`: RMS force residual of each elongation-driven test, N (NaN for a
         force-driven test); `None` in results read from files written before drives.
-    - `drives`: each test's drive, `"force"` or `"elongation"` (see
-        [`jaxcable.fit`][]).
+    - `drives`: each test's drive, [`jaxcable.FORCE_DRIVEN`][] or
+        [`jaxcable.ELONGATION_DRIVEN`][] (see [`jaxcable.fit`][]); PARAMS.json
+        writes their names.
     - `loss_unit`: `"m^2"` (every test force-driven), `"N^2"` (every test
         elongation-driven) or `"1"` (both: residuals in noise units).
     """
@@ -91,14 +122,24 @@ class FitResult:
     test_ids: tuple[str, ...]
     num_samples: np.ndarray
     warnings: tuple[str, ...]
-    converged: bool
-    message: str
+    result: RESULTS
     num_steps: int
     start_losses: np.ndarray
     per_test: tuple[str, ...] = ()
     rmse_N: np.ndarray | None = None
-    drives: tuple[str, ...] = ()
+    drives: tuple[AbstractTestDrive, ...] = ()
     loss_unit: str = "m^2"
+
+    @property
+    def converged(self) -> bool:
+        """Whether the chosen start's solver run converged (`result` is
+        `RESULTS.successful`)."""
+        return _result_name(self.result) == "successful"
+
+    @property
+    def message(self) -> str:
+        """The message of `result` ("" when the fit converged)."""
+        return str(RESULTS[self.result])
 
     @property
     def params(self) -> dict[str, float]:
@@ -111,15 +152,23 @@ class FitResult:
         with np.errstate(divide="ignore", invalid="ignore"):
             return np.where(self.values != 0, self.stderr / np.abs(self.values), np.inf)
 
-    def _drive(self, i: int) -> str:
-        return self.drives[i] if self.drives else "force"
+    def drive(self, i: int) -> AbstractTestDrive:
+        """Test i's drive (force-driven for a result without `drives`)."""
+        return self.drives[i] if self.drives else FORCE_DRIVEN
 
     def rmse(self, i: int) -> tuple[float, str]:
         """Test i's RMS residual in its scored channel and that channel's unit
         (`"mm"` or `"N"`)."""
-        if self._drive(i) == "force":
-            return float(self.rmse_mm[i]), "mm"
-        return float(self.rmse_N[i]), "N"
+        drive = self.drive(i)
+        value = self.rmse_N[i] if drive.scores_force else self.rmse_mm[i]
+        return float(value), drive.report_unit
+
+    def outcome_text(self, failed: str = "NOT converged") -> str:
+        """The solver's outcome in words, as the reports print it: `converged in N
+        steps`, else `failed` followed by the solver's message in parentheses."""
+        if self.converged:
+            return f"converged in {self.num_steps} steps"
+        return f"{failed} ({self.message})"
 
     def _per_test_rows(self):
         return zip(self.test_ids, self.num_samples, self.rmse_mm, self.rmse_percent)
@@ -133,19 +182,14 @@ class FitResult:
         The report as a multi-line string.
         """
         n = int(np.sum(self.num_samples))
-        outcome = (
-            f"converged in {self.num_steps} steps"
-            if self.converged
-            else f"NOT converged ({self.message})"
-        )
         lines = [
             f"jaxcable fit: {type(self.model).__name__}, {len(self.test_ids)} test(s), "
             f"{n} samples, {len(self.names)} parameters",
-            f"SSR {self.loss:.6g} {self.loss_unit}; {outcome}; "
+            f"SSR {self.loss:.6g} {self.loss_unit}; {self.outcome_text()}; "
             f"best of {len(self.start_losses)} start(s)",
             "",
         ]
-        if set(self.drives) <= {"force"}:
+        if set(self.drives) <= {FORCE_DRIVEN}:
             lines.append(f"{'test':<24} {'samples':>8} {'RMSE mm':>10} {'RMSE %':>8}")
             for tid, k, mm, pct in self._per_test_rows():
                 lines.append(f"{tid[:24]:<24} {int(k):>8} {mm:>10.4f} {pct:>8.2f}")
@@ -159,7 +203,7 @@ class FitResult:
             ):
                 value, unit = self.rmse(i)
                 lines.append(
-                    f"{tid[:24]:<24} {self._drive(i):>10} {int(k):>8} "
+                    f"{tid[:24]:<24} {self.drive(i).name:>10} {int(k):>8} "
                     f"{value:>10.4g} {unit:<4} {pct:>8.2f}"
                 )
         lines += [
@@ -221,10 +265,10 @@ class FitResult:
                 {
                     "id": tid,
                     "samples": int(k),
-                    "drive": self._drive(i),
+                    "drive": self.drive(i).name,
                     "rmse_mm": _json_number(float(mm)),
                     "rmse_N": _json_number(self.rmse(i)[0])
-                    if self._drive(i) != "force"
+                    if self.drive(i).scores_force
                     else None,
                     "rmse_percent": _json_number(float(pct)),
                 }
@@ -232,6 +276,7 @@ class FitResult:
             ],
             "loss_m2": float(self.loss),
             "loss_unit": self.loss_unit,
+            "result": _result_name(self.result),
             "converged": bool(self.converged),
             "message": self.message,
             "num_steps": int(self.num_steps),
@@ -318,13 +363,12 @@ class FitResult:
                 [_from_json_number(t["rmse_percent"]) for t in tests]
             ),
             rmse_N=np.array([_from_json_number(t.get("rmse_N")) for t in tests]),
-            drives=tuple(t.get("drive", "force") for t in tests),
+            drives=tuple(as_test_drive(t.get("drive", "force")) for t in tests),
             loss_unit=doc.get("loss_unit", "m^2"),
             test_ids=tuple(t["id"] for t in tests),
             num_samples=np.array([t["samples"] for t in tests], int),
             warnings=tuple(doc.get("warnings", [])),
-            converged=bool(doc["converged"]),
-            message=doc.get("message", ""),
+            result=_read_result(doc),
             num_steps=int(doc["num_steps"]),
             start_losses=np.array(
                 [_from_json_number(x) for x in doc.get("start_losses", [])]

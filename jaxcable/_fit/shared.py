@@ -17,16 +17,20 @@ from collections.abc import Sequence
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import jax.random as jr
 import numpy as np
 from jaxtyping import PRNGKeyArray
 
 from .._models import AbstractCableModel
 from .data import as_test_list, pad_tests
-from .exported import current_fit_kernel
-from .fit import _checked_solver, _require_valid_start, fit_result
+from .fit import _checked_solver, fit_result, run_kernel
 from .parameters import Layout, declared_parameters, field_at
-from .problem import Problem, _checked_model, _start, make_problem
+from .problem import (
+    _checked_model,
+    _start,
+    build_problem,
+    make_problem,
+    require_enough_samples,
+)
 from .result import FitResult
 
 
@@ -140,27 +144,21 @@ def fit_subset(
             )
     scales, fixed = _start(model, layout, only=free)
     mask = np.isin(np.arange(p), order)
-    n = int(np.asarray(data.weight).sum())
-    if n <= len(order):
-        raise ValueError(
-            f"`tests` have {n} fitted samples for {len(order)} parameters; a "
-            "least-squares fit needs more samples than parameters."
-        )
+    require_enough_samples(data, len(order))
     dtype = jnp.result_type(float)
     select = np.array(order + [p] * (size - len(order)), np.int32)
     v0 = np.concatenate([fixed[order], np.zeros(size - len(order))])
-    problem = Problem(
-        layout=layout,
-        static=static,
-        base=params,
-        scales=jnp.asarray(scales, dtype),
-        data=data,
+    problem = build_problem(
+        layout,
+        params,
+        static,
+        scales,
+        data,
         select=jnp.asarray(select),
         fixed=jnp.asarray(fixed, dtype),
         free=jnp.asarray(mask),
     )
-    key = jr.key(0) if key is None else key
-    out = current_fit_kernel()(
+    out = run_kernel(
         problem,
         jnp.asarray(v0, dtype),
         key,
@@ -169,8 +167,8 @@ def fit_subset(
         "fwd",
         multistart,
         spread,
+        test_list,
     )
-    _require_valid_start(out, test_list, problem)
     k = len(order)
     # The fitted coordinates' block: the padding ones carry zero columns.
     out = eqx.tree_at(

@@ -32,8 +32,8 @@ class LevenbergMarquardt(optx.AbstractGaussNewton):
 
     The damped step is solved by Cholesky on the normal equations (J^T J + lambda I,
     p x p) rather than by QR of the tall (n + p, p) matrix: LAPACK's QR of a tall
-    matrix, through a multi-threaded OpenBLAS on a busy 2-core machine, took 10-60 ms
-    per step (its threads spin), several Jacobians' worth.
+    matrix, through a multi-threaded OpenBLAS on a loaded machine, can cost several
+    Jacobians' worth per step (its threads spin).
     Squaring the condition number is harmless here: lambda > 0 bounds it, the
     parameters are log-scaled, and the fit runs in float64 (a float32 fit of a
     poorly identified problem may fail the solve; `throw=False` then reports it)."""
@@ -147,8 +147,8 @@ def with_jacobian_jvp(
 
     Optimistix linearises the residual function and then materialises, transposes
     and applies the linearisation. Through a simulation's scan each of those is its
-    own copy of the scan in the compiled program (the calibration's program compiled
-    in 33 s, 18 s with this rule); with this rule they are products with one dense
+    own copy of the scan in the compiled program (a compile time about twice as long
+    for the calibration's program); with this rule they are products with one dense
     (n, p) matrix, and the scan is differentiated once per step. `aux` (anything the
     residuals computed on the way, e.g. the simulated values) has a zero tangent:
     a solver's state then holds it at the returned point without a further
@@ -270,7 +270,7 @@ def _data_derived_start(
     measured = data.measured / data.scale[:, None]
     # A stiffer model lengthens less under a force (the elongation scales as 1 / c)
     # and pulls harder at an elongation (the force scales as c).
-    scored_force = np.array([d != "force" for d in data.drive])
+    scored_force = np.array([d.scores_force for d in data.drive])
     iterations = _SECANT_ITERATIONS if any(k != 0 for k in layout.stiffness) else 1
     limit = math.log(_SECANT_RANGE)
 
@@ -371,9 +371,9 @@ def fit_kernel(
     starts = jnp.concatenate([u_start[None], u_start[None] + noise])
     data = problem.data
     # The starts in lockstep (one vmapped solve, as long as the slowest start): the
-    # scans of a fit are bound by their per-sample cost, not by the batch, so on a
-    # 2-core CPU the bundled fit's two starts took 0.41-0.50 s instead of 0.53-0.64 s
-    # one after the other (`lax.map`), for the same compile time within the noise.
+    # scans of a fit are bound by their per-sample cost, not by the batch, so the
+    # starts together take less time than one after the other (`lax.map`), for the
+    # same compile time.
     values, results, steps, r, jacobian = jax.vmap(
         lambda u0: solve(problem, u0, solver, max_steps, jac)
     )(starts)

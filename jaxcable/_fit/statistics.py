@@ -140,8 +140,8 @@ def statistics(
     identifiability warnings at the chosen optimum (see [`jaxcable.fit`][]).
 
     Works on the p x p matrix J^T J, formed in the kernel, not on the tall J: LAPACK
-    on a tall matrix through a multi-threaded OpenBLAS took ~0.1 s on a busy 2-core
-    machine (its threads spin), more than the whole fit. The singular values of J for
+    on a tall matrix through a multi-threaded OpenBLAS on a loaded machine can cost
+    more than the whole fit (its threads spin). The singular values of J for
     the third rule are the square roots of J^T J's eigenvalues (resolved down to ~1e-8
     of the largest in float64, well below the rule's 1e-6).
 

@@ -12,11 +12,12 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .._drive import TEST_DRIVES, AbstractTestDrive
 from .slack import force_noise as noise_std
 from .vocabulary import CONTROL_WORDS
 
 
-CONTROLS = ("force", "elongation")
+CONTROLS = tuple(TEST_DRIVES)
 
 # The detection's windows: the history is cut into this many blocks of samples (fewer
 # for a short history, so that a block has _MIN_BLOCK samples).
@@ -64,7 +65,8 @@ class ControlDetection(NamedTuple):
 
     **Fields:**
 
-    - `control`: `"force"` or `"elongation"`.
+    - `control`: the drive's name, `"force"` or `"elongation"` (its value:
+        `drive`).
     - `reason`: one line for a report: where the answer came from (the caller, the
         file's metadata, or the data with its evidence).
     - `force_windows`: windows where the force is held while the elongation moves, plus
@@ -79,6 +81,12 @@ class ControlDetection(NamedTuple):
     force_windows: int = 0
     elongation_windows: int = 0
     detected: bool = False
+
+    @property
+    def drive(self) -> AbstractTestDrive:
+        """The drive value of `control` ([`jaxcable.FORCE_DRIVEN`][] or
+        [`jaxcable.ELONGATION_DRIVEN`][])."""
+        return TEST_DRIVES[self.control]
 
 
 def _window_evidence(t, x, y) -> tuple[int, int]:
@@ -169,14 +177,17 @@ def detect_control(
     )
 
 
-def resolve_control(test, requested: str | None) -> ControlDetection:
-    """The control of one test: `requested` (`"force"`, `"elongation"`, or `None` /
-    `"auto"`), else the test's `metadata['control']`, else detected from its data.
+def resolve_control(test, requested) -> ControlDetection:
+    """The control of one test: `requested` (a drive value, its name `"force"` or
+    `"elongation"`, or `None` / `"auto"`), else the test's `metadata['control']`,
+    else detected from its data.
 
     **Raises:**
 
     `ValueError` naming `drive` for an unknown `requested`.
     """
+    if isinstance(requested, AbstractTestDrive):
+        return ControlDetection(requested.name, f"{requested.name} (given)")
     if requested is not None and requested != "auto":
         name = control_name(requested, "`drive`")
         return ControlDetection(name, f"{name} (given)")

@@ -43,12 +43,19 @@ from .extensions import (
     log_shift_arrhenius as log_shift_arrhenius,
     log_shift_wlf as log_shift_wlf,
 )
+from .fields import (
+    parameter as parameter,
+    parameter_table as parameter_table,
+    setting as setting,
+    transform_table as transform_table,
+)
 from .park import (
     IntegratedModel as IntegratedModel,
     IntegratedState as IntegratedState,
 )
 from .piao import (
     PIAO_TABLE1 as PIAO_TABLE1,
+    AbstractFiveElement as AbstractFiveElement,
     FiveElementModel as FiveElementModel,
     FiveElementState as FiveElementState,
     table1_field as table1_field,
@@ -66,6 +73,8 @@ from .registry import (
     PARK_IDENTIFIABLE as PARK_IDENTIFIABLE,
     ParameterInfo as ParameterInfo,
     cli_name as cli_name,
+    describe as describe,
     identifiable as identifiable,
+    innermost as innermost,
     parameter_info as parameter_info,
 )

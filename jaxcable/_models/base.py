@@ -1,6 +1,12 @@
 """What every cable model shares: the strain split by mechanism ([`StrainParts`][]), the
 model interface ([`AbstractCableModel`][]) and the interface of a model extension
-that wraps another model ([`AbstractExtension`][])."""
+that wraps another model ([`AbstractExtension`][]).
+
+A model class states its facts once: its parameters as declared fields
+(`jaxcable._models.fields.parameter`, from which the checks and the fit information
+are derived) and its command-line name, `CLI_NAME`, which also registers the class
+([`REGISTERED`][]: every class a PARAMS.json may name).
+"""
 
 import abc
 from typing import Generic, TypeVar
@@ -9,11 +15,18 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, Float, Int
 
+from .. import _checks
 from .._cable import Cable
 from .._results import RESULTS
+from . import fields
 
 
 _State = TypeVar("_State")
+
+REGISTERED: dict[str, type] = {}
+"""Every model class that declares its `CLI_NAME`, by class name, in the order of
+definition: filled as the classes are defined (the layers above `_models` register
+theirs by defining them), so complete once `jaxcable` is imported."""
 
 
 class StrainParts(eqx.Module):
@@ -65,8 +78,33 @@ class AbstractCableModel(eqx.Module, Generic[_State]):
         the step. `direction` is +1 for a loading step, -1 for an unloading step and 0
         to keep the current branch (holds, rests). `advance` must be a smooth function
         of `dt` and `force` (the drivers solve for either by Newton's method);
-    - `check(cable)`: a traced domain check of the parameters for this cable.
+    - `check(cable)`: a traced domain check of the parameters for this cable (by
+        default: every field declared with `jaxcable._models.fields.parameter` is
+        in its domain).
+
+    A model of the library declares `CLI_NAME` (its name on the command line and in
+    the registry) and its parameters with their unit, domain and fit transform; the
+    construction-time check of the declared fields, in field order, is derived from
+    them, followed by the class's `check_more` for what a field alone cannot say.
     """
+
+    # The name on the command line and in the registry; None: not registered. Class
+    # facts are plain class attributes, so that they are no (pseudo-)fields of the
+    # dataclass.
+    CLI_NAME = None
+
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        if "CLI_NAME" in cls.__dict__:
+            REGISTERED[cls.__name__] = cls
+
+    def __check_init__(self):
+        fields.check_declared(self, qualified=not isinstance(self, AbstractExtension))
+        self.check_more()
+
+    def check_more(self) -> None:
+        """Raise `ValueError` for concrete parameters that the declared domains of
+        single fields do not cover (run after those checks; none by default)."""
 
     @abc.abstractmethod
     def init(self, cable: Cable) -> _State:
@@ -105,7 +143,6 @@ class AbstractCableModel(eqx.Module, Generic[_State]):
         `(new_state, parts)` with the [`jaxcable.StrainParts`][] at the end of the step.
         """
 
-    @abc.abstractmethod
     def check(self, cable: Cable) -> RESULTS:
         """Traced check that the parameters are in their domain for `cable`.
 
@@ -113,6 +150,25 @@ class AbstractCableModel(eqx.Module, Generic[_State]):
 
         `RESULTS.successful` or `RESULTS.parameter_out_of_domain`.
         """
+        del cable
+        return _checks.domain_result(fields.declared_ok(self))
+
+
+class _ClassFact:
+    """A class attribute computed from the class (its declarations) when read."""
+
+    def __init__(self, compute):
+        self.compute = compute
+        self.__doc__ = compute.__doc__
+
+    def __get__(self, obj, owner=None):
+        return self.compute(owner if owner is not None else type(obj))
+
+
+def _size_field(cls) -> str:
+    """The first own parameter with a declared null value."""
+    facts = fields.field_facts(cls)
+    return next(n for n in fields.fit_parameters(cls) if facts[n].null is not None)
 
 
 class AbstractExtension(AbstractCableModel[_State]):
@@ -120,40 +176,62 @@ class AbstractExtension(AbstractCableModel[_State]):
     [`jaxcable.AbstractCableModel`][] (wrap, don't subclass), composable by nesting,
     e.g. `SensorDrift(BeddingIn(IntegratedModel()))`.
 
-    A concrete extension declares `base` as its first field, then its own parameters,
-    and these class variables, read by the fit and the diagnosis:
+    Its first field is `base`, the wrapped model. A concrete extension declares its
+    own parameters (`jaxcable._models.fields.parameter`: the size of its effect with its
+    `null` value, the `start` values of `wrap(base)`) and its `CLI_NAME`. Derived
+    from these, read by the fit and the diagnosis:
 
-    - `EXTENSION_ID`: the stable id (a key of [`jaxcable.EXTENSIONS`][] for the
-        candidates of the diagnosis);
-    - `EFFECT_FIELDS`: its own parameters that a diagnosis fits together with the
-        base model's;
-    - `SIZE_FIELD`, `SIZE_UNIT`, `SIZE_NULL`: the one field reported as the size of
-        the effect, its unit, and its null value (the base exactly);
-    - `FIT_INFO`: `{field: (transform, unit[, stiffness])}` for each fitted field,
-        with transform `"log"` (positive) or `"linear"` (either sign, scaled by
-        |start|), and the optional power with which the field follows a stiffness
-        scaling of the model;
+    - `EXTENSION_ID`: the stable id, `CLI_NAME` with `_` for `-` (a key of
+        [`jaxcable.EXTENSIONS`][] for the candidates of the diagnosis);
+    - `EFFECT_FIELDS`: its own fit parameters, which a diagnosis fits together with
+        the base model's;
+    - `SIZE_FIELD`, `SIZE_UNIT`, `SIZE_NULL`: the first of them with a declared
+        null value, reported as the size of the effect, its unit, and that null value
+        (the base exactly).
 
-    and the class method `wrap(base)`. At the null value of its effect parameter an
-    extension reproduces its base model exactly. It receives `direction` only to pass
-    it on to the base.
+    A candidate of the diagnosis may also declare `LIBRARY_TERM` and
+    `applicability`. At the null value of its effect parameter an extension
+    reproduces its base model exactly. It receives `direction` only to pass it on to
+    the base.
     """
 
-    base: eqx.AbstractVar[AbstractCableModel]
+    base: AbstractCableModel
 
-    EXTENSION_ID: eqx.AbstractClassVar[str]
-    EFFECT_FIELDS: eqx.AbstractClassVar[tuple[str, ...]]
-    SIZE_FIELD: eqx.AbstractClassVar[str]
-    SIZE_UNIT: eqx.AbstractClassVar[str]
-    SIZE_NULL: eqx.AbstractClassVar[float]
-    FIT_INFO: eqx.AbstractClassVar[dict[str, tuple]]
+    CLI_NAME: eqx.AbstractClassVar[str]
+    EXTENSION_ID = _ClassFact(lambda cls: cls.CLI_NAME.replace("-", "_"))
+    EFFECT_FIELDS = _ClassFact(fields.fit_parameters)
+    SIZE_FIELD = _ClassFact(_size_field)
+    SIZE_UNIT = _ClassFact(lambda cls: fields.field_facts(cls)[cls.SIZE_FIELD].unit)
+    SIZE_NULL = _ClassFact(lambda cls: fields.field_facts(cls)[cls.SIZE_FIELD].null)
+    # The term of the discovery's library ([`jaxcable.TERMS`][]) whose regression
+    # coefficient estimates this extension's effect, or None.
+    LIBRARY_TERM = None
+
+    def check(self, cable: Cable) -> RESULTS:
+        """Traced: the declared fields in their domains, and the base's check."""
+        return _checks.domain_result(fields.declared_ok(self), self.base.check(cable))
 
     @classmethod
-    @abc.abstractmethod
+    def applicability(cls, tests) -> str:
+        """Why `tests` cannot show this extension's effect at all, or "" when they
+        can (the diagnosis then reports the candidate as not applicable).
+
+        **Arguments:**
+
+        - `tests`: the measured tests (objects with the columns as attributes).
+
+        **Returns:**
+
+        The reason, a short phrase, or "".
+        """
+        del tests
+        return ""
+
+    @classmethod
     def wrap(cls, base: AbstractCableModel) -> "AbstractExtension":
-        """The extension around `base` with small but nonzero start values of its
-        effect parameters for a fit (so that a log transform works and the gradient
-        is informative).
+        """The extension around `base` at the declared start values of its
+        parameters for a fit (`start`: small but nonzero effects, so that a log
+        transform works and the gradient is informative).
 
         **Arguments:**
 
@@ -163,6 +241,7 @@ class AbstractExtension(AbstractCableModel[_State]):
 
         An instance of the extension.
         """
+        return cls(base, **fields.starts(cls))
 
     @classmethod
     def switched_off(cls, base: AbstractCableModel) -> "AbstractExtension":
@@ -183,6 +262,14 @@ class AbstractExtension(AbstractCableModel[_State]):
             cls.SIZE_NULL, jnp.result_type(getattr(model, cls.SIZE_FIELD))
         )
         return eqx.tree_at(lambda m: getattr(m, cls.SIZE_FIELD), model, null)
+
+
+def innermost(model: AbstractCableModel) -> AbstractCableModel:
+    """The model at the core of the extensions around `model` (following `.base`),
+    `model` itself if it is no extension."""
+    while isinstance(model, AbstractExtension):
+        model = model.base
+    return model
 
 
 def add_parts(

@@ -12,10 +12,10 @@ import numpy as np
 from jaxtyping import Array, Float, Int
 
 from .. import _checks
-from .._arrays import field_array
 from .._cable import Cable
 from .._results import RESULTS
 from .base import AbstractCableModel, StrainParts, state_zero
+from .fields import MODULUS, VISCOSITY, declared_ok, parameter, setting
 from .kernels import kelvin_voigt_step, loading_weight, play
 
 
@@ -41,13 +41,9 @@ class HookeModel(AbstractCableModel[HookeState]):
         [`jaxcable.IntegratedModel`][] default set for Dyneema SK78, 3 mm).
     """
 
-    E: Float[Array, "*batch"] = eqx.field(converter=field_array, default=2.2e9)
+    CLI_NAME = "hooke"
 
-    def __check_init__(self):
-        _checks.check_parameters("HookeModel", self, ("E",))
-
-    def check(self, cable: Cable) -> RESULTS:
-        return _checks.domain_result(_checks.parameters_ok(self, ("E",)))
+    E: Float[Array, "*batch"] = parameter(2.2e9, **MODULUS)
 
     def init(self, cable: Cable) -> HookeState:
         return HookeState()
@@ -84,9 +80,6 @@ class BurgersState(eqx.Module):
     dashpot: Float[Array, ""]
 
 
-_BURGERS_FIELDS = ("E1", "eta0", "E2", "eta2")
-
-
 class BurgersModel(AbstractCableModel[BurgersState]):
     """The Burgers model: a Maxwell element (spring E1, dashpot eta0) in series with a
     Kelvin-Voigt element (spring E2 parallel to dashpot eta2).
@@ -117,16 +110,12 @@ class BurgersModel(AbstractCableModel[BurgersState]):
     eta0 = 1.6e11 Pa s.
     """
 
-    E1: Float[Array, "*batch"] = eqx.field(converter=field_array, default=2.2e9)
-    eta0: Float[Array, "*batch"] = eqx.field(converter=field_array, default=1.6e11)
-    E2: Float[Array, "*batch"] = eqx.field(converter=field_array, default=3.7e8)
-    eta2: Float[Array, "*batch"] = eqx.field(converter=field_array, default=3.7e10)
+    CLI_NAME = "burgers"
 
-    def __check_init__(self):
-        _checks.check_parameters("BurgersModel", self, _BURGERS_FIELDS)
-
-    def check(self, cable: Cable) -> RESULTS:
-        return _checks.domain_result(_checks.parameters_ok(self, _BURGERS_FIELDS))
+    E1: Float[Array, "*batch"] = parameter(2.2e9, **MODULUS)
+    eta0: Float[Array, "*batch"] = parameter(1.6e11, **VISCOSITY)
+    E2: Float[Array, "*batch"] = parameter(3.7e8, **MODULUS)
+    eta2: Float[Array, "*batch"] = parameter(3.7e10, **VISCOSITY)
 
     def init(self, cable: Cable) -> BurgersState:
         zero = state_zero(cable, self.E1)
@@ -177,9 +166,6 @@ _ROS2_GAMMA = 1.0 - 2.0**-0.5
 
 # 1 N on the 3 mm cable of Park et al. (A = 7.07e-6 m^2): ~1.41e5 Pa.
 DEFAULT_BAND = 1.0 / (math.pi / 4 * 3e-3**2)
-
-# Bouc-Wen parameters that must be finite and > 0.
-_BOUC_WEN_POSITIVE = ("E", "sigma_y", "z_y", "A", "beta", "band")
 
 
 class BoucWenState(eqx.Module):
@@ -303,21 +289,21 @@ class BoucWenModel(AbstractCableModel[BoucWenState]):
     sigma_y = 5e6 Pa (about 35 N), A = 1, beta = 0.6, gamma = 0.4, n = 1.
     """
 
-    E: Float[Array, "*batch"] = eqx.field(converter=field_array, default=2.2e9)
-    sigma_y: Float[Array, "*batch"] = eqx.field(converter=field_array, default=5e6)
-    z_y: Float[Array, "*batch"] = eqx.field(converter=field_array, default=2e-3)
-    A: Float[Array, "*batch"] = eqx.field(converter=field_array, default=1.0)
-    beta: Float[Array, "*batch"] = eqx.field(converter=field_array, default=0.6)
-    gamma: Float[Array, "*batch"] = eqx.field(converter=field_array, default=0.4)
-    n: Float[Array, "*batch"] = eqx.field(converter=field_array, default=1.0)
-    band: Float[Array, "*batch"] = eqx.field(
-        converter=field_array, default=DEFAULT_BAND
-    )
+    CLI_NAME = "bouc-wen"
+
+    E: Float[Array, "*batch"] = parameter(2.2e9, **MODULUS)
+    sigma_y: Float[Array, "*batch"] = parameter(5e6, unit="Pa")
+    # eps = sigma / E + z_y (...): E -> c E with z_y -> z_y / c divides eps by c.
+    z_y: Float[Array, "*batch"] = parameter(2e-3, unit="-", stiffness=-1.0)
+    A: Float[Array, "*batch"] = parameter(1.0, unit="-")
+    beta: Float[Array, "*batch"] = parameter(0.6, unit="-")
+    # |gamma| <= beta (a dissipative loop) and n >= 1: checked by `check_more`.
+    gamma: Float[Array, "*batch"] = parameter(0.4, unit="-", transform="tanh:beta")
+    n: Float[Array, "*batch"] = parameter(1.0, unit="-", transform="log1")
+    band: Float[Array, "*batch"] = setting(DEFAULT_BAND, unit="Pa")
     substeps: int = eqx.field(static=True, default=8)
 
-    def __check_init__(self):
-        _checks.check_parameters("BoucWenModel", self, _BOUC_WEN_POSITIVE)
-        _checks.check_parameters("BoucWenModel", self, ("gamma", "n"), positive=False)
+    def check_more(self):
         if _checks.is_concrete(self.beta, self.gamma):
             if np.any(np.abs(self.gamma) > self.beta):
                 raise ValueError(
@@ -349,7 +335,7 @@ class BoucWenModel(AbstractCableModel[BoucWenState]):
 
     def check(self, cable: Cable) -> RESULTS:
         ok = _checks.all_ok(
-            _checks.parameters_ok(self, _BOUC_WEN_POSITIVE),
+            declared_ok(self, "positive"),
             (jnp.abs(self.gamma) <= self.beta) & (self.n >= 1) & self._monotone(),
         )
         return _checks.domain_result(ok)

@@ -11,15 +11,15 @@ and Piao's Table 1 ([`PIAO_TABLE1`][]). The parameter surfaces (Eq. 5, Table 3) 
 `piao_surface.py`.
 """
 
+import abc
+
 import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, Float, Int
 
-from .. import _checks
-from .._arrays import field_array
 from .._cable import Cable
-from .._results import RESULTS
 from .base import AbstractCableModel, StrainParts, state_zero
+from .fields import MODULUS, VISCOSITY, parameter
 from .kernels import kelvin_voigt_step, running_max
 
 
@@ -39,8 +39,20 @@ eta_UL2, eta_UL3) set equal to them: the unloading table (Table 2) is lost."""
 
 
 def table1_field(name: str):
-    """A model field (Pa or Pa s) whose default is Piao's Table 1 value `name`."""
-    return eqx.field(converter=field_array, default=PIAO_TABLE1[name])
+    """A model parameter (a modulus, Pa, or a viscosity, Pa s) whose default is Piao's
+    Table 1 value `name`."""
+    facts = VISCOSITY if name.startswith("eta") else MODULUS
+    return parameter(PIAO_TABLE1[name], **facts)
+
+
+# One family's parameters, in the order of `family_step`: (E1, E2, eta2, E3, eta3).
+ParameterSet = tuple[
+    Float[Array, ""],
+    Float[Array, ""],
+    Float[Array, ""],
+    Float[Array, ""],
+    Float[Array, ""],
+]
 
 
 class FiveElementState(eqx.Module):
@@ -73,20 +85,6 @@ class FiveElementState(eqx.Module):
     def sigma_UL(self) -> Float[Array, ""]:
         """The drop of the stress below its largest value so far, Pa (<= 0)."""
         return self.stress - self.sigma_L
-
-
-_FIVE_ELEMENT_FIELDS = (
-    "E_L1",
-    "E_L2",
-    "E_L3",
-    "eta_L2",
-    "eta_L3",
-    "E_UL1",
-    "E_UL2",
-    "E_UL3",
-    "eta_UL2",
-    "eta_UL3",
-)
 
 
 def family_step(
@@ -203,7 +201,82 @@ def superposed_strain(
     )
 
 
-class FiveElementModel(AbstractCableModel[FiveElementState]):
+class AbstractFiveElement(AbstractCableModel[FiveElementState]):
+    """Piao's five-element superposition ([`jaxcable.FiveElementModel`][]) with its
+    loading and unloading parameter sets read at each step, so that one `advance`
+    serves the model with fixed sets and one whose sets follow the sample
+    (`jaxcable.LiveFiveElement`)."""
+
+    @abc.abstractmethod
+    def parameter_sets(
+        self, force: Float[Array, ""], length: Float[Array, ""]
+    ) -> tuple[ParameterSet, ParameterSet]:
+        """The loading and the unloading set, each (E1, E2, eta2, E3, eta3) in Pa and
+        Pa s, of a step ending at `force` (N) on a cable of free length `length` (m).
+        """
+
+    def flagged(self, loading: ParameterSet, parts: StrainParts) -> StrainParts:
+        """The strain parts reported for a step whose loading set is `loading`:
+        `parts` themselves by default."""
+        del loading
+        return parts
+
+    def advance(
+        self,
+        state: FiveElementState,
+        cable: Cable,
+        dt: Float[Array, ""],
+        force: Float[Array, ""],
+        direction: Int[Array, ""],
+    ) -> tuple[FiveElementState, StrainParts]:
+        # `direction` is not used: the split of the stress into its running maximum
+        # and the drop below it is continuous in the force history (class docstring
+        # of FiveElementModel).
+        del direction
+        loading_set, unloading_set = self.parameter_sets(force, cable.length)
+        stress = force / cable.area
+        sigma_L = running_max(state.sigma_L, stress)
+        # The stress is linear over the step; its running maximum is constant until
+        # the stress passes the previous maximum, at the share `split` of the step,
+        # and follows it from there. Both families are advanced exactly over the two
+        # pieces (the second has length 0 unless the step sets a new maximum).
+        passes = stress > state.sigma_L
+        rise = jnp.where(passes, stress - state.stress, 1.0)
+        split = jnp.where(passes, (state.sigma_L - state.stress) / rise, 1.0)
+        stress_split = jnp.where(passes, state.sigma_L, stress)
+        pieces = (split * dt, (1.0 - split) * dt)
+        loading = family_step(
+            state.q_L2,
+            state.q_L3,
+            (state.sigma_L, state.sigma_L, sigma_L),
+            pieces,
+            *loading_set,
+        )
+        unloading = family_step(
+            state.q_UL2,
+            state.q_UL3,
+            (
+                state.stress - state.sigma_L,
+                stress_split - state.sigma_L,
+                stress - sigma_L,
+            ),
+            pieces,
+            *unloading_set,
+        )
+        new_state = FiveElementState(
+            stress=stress,
+            sigma_L=sigma_L,
+            q_L2=loading[1],
+            q_L3=loading[2],
+            q_UL2=unloading[1],
+            q_UL3=unloading[2],
+        )
+        return new_state, self.flagged(
+            loading_set, superposed_strain(loading, unloading)
+        )
+
+
+class FiveElementModel(AbstractFiveElement):
     r"""Piao et al.'s five-element creep model: a linear spring in series with two
     Kelvin-Voigt elements, with separate loading (L) and unloading (UL) parameters.
 
@@ -315,87 +388,42 @@ class FiveElementModel(AbstractCableModel[FiveElementState]):
     to simulate parameter sets.
     """
 
-    E_L1: Float[Array, "*batch"] = eqx.field(converter=field_array, default=2.2e14)
+    CLI_NAME = "five-element"
+
+    E_L1: Float[Array, "*batch"] = parameter(2.2e14, **MODULUS)
     E_L2: Float[Array, "*batch"] = table1_field("E_L2")
     E_L3: Float[Array, "*batch"] = table1_field("E_L3")
     eta_L2: Float[Array, "*batch"] = table1_field("eta_L2")
     eta_L3: Float[Array, "*batch"] = table1_field("eta_L3")
-    E_UL1: Float[Array, "*batch"] = eqx.field(converter=field_array, default=2.2e14)
+    E_UL1: Float[Array, "*batch"] = parameter(2.2e14, **MODULUS)
     E_UL2: Float[Array, "*batch"] = table1_field("E_UL2")
     E_UL3: Float[Array, "*batch"] = table1_field("E_UL3")
     eta_UL2: Float[Array, "*batch"] = table1_field("eta_UL2")
     eta_UL3: Float[Array, "*batch"] = table1_field("eta_UL3")
 
-    def __check_init__(self):
-        _checks.check_parameters("FiveElementModel", self, _FIVE_ELEMENT_FIELDS)
+    # `check` (derived from the declarations): every modulus and viscosity finite
+    # and > 0. Any pair of L and UL sets is admissible: the recovery bound keeps the
+    # strain >= 0 whatever their relation, so distinct sets need no flag.
 
-    def check(self, cable: Cable) -> RESULTS:
-        """`RESULTS.parameter_out_of_domain` unless every modulus and viscosity is
-        finite and > 0 (traced; `__init__` raises for concrete values). Any pair of
-        L and UL sets is admissible: the recovery bound keeps the strain >= 0
-        whatever their relation, so distinct sets need no flag."""
-        return _checks.domain_result(_checks.parameters_ok(self, _FIVE_ELEMENT_FIELDS))
+    @classmethod
+    def from_sets(
+        cls, loading: ParameterSet, unloading: ParameterSet
+    ) -> "FiveElementModel":
+        """The model of a loading and an unloading set, each (E1, E2, eta2, E3,
+        eta3) in Pa and Pa s."""
+        return cls(*(s[i] for s in (loading, unloading) for i in (0, 1, 3, 2, 4)))
+
+    def parameter_sets(
+        self, force: Float[Array, ""], length: Float[Array, ""]
+    ) -> tuple[ParameterSet, ParameterSet]:
+        del force, length
+        return (
+            (self.E_L1, self.E_L2, self.eta_L2, self.E_L3, self.eta_L3),
+            (self.E_UL1, self.E_UL2, self.eta_UL2, self.E_UL3, self.eta_UL3),
+        )
 
     def init(self, cable: Cable) -> FiveElementState:
         zero = state_zero(cable, self.E_L1)
         return FiveElementState(
             stress=zero, sigma_L=zero, q_L2=zero, q_L3=zero, q_UL2=zero, q_UL3=zero
         )
-
-    def advance(
-        self,
-        state: FiveElementState,
-        cable: Cable,
-        dt: Float[Array, ""],
-        force: Float[Array, ""],
-        direction: Int[Array, ""],
-    ) -> tuple[FiveElementState, StrainParts]:
-        # `direction` is not used: the split of the stress into its running maximum
-        # and the drop below it is continuous in the force history (class docstring).
-        del direction
-        stress = force / cable.area
-        sigma_L = running_max(state.sigma_L, stress)
-        # The stress is linear over the step; its running maximum is constant until
-        # the stress passes the previous maximum, at the share `split` of the step,
-        # and follows it from there. Both families are advanced exactly over the two
-        # pieces (the second has length 0 unless the step sets a new maximum).
-        passes = stress > state.sigma_L
-        rise = jnp.where(passes, stress - state.stress, 1.0)
-        split = jnp.where(passes, (state.sigma_L - state.stress) / rise, 1.0)
-        stress_split = jnp.where(passes, state.sigma_L, stress)
-        pieces = (split * dt, (1.0 - split) * dt)
-        loading = family_step(
-            state.q_L2,
-            state.q_L3,
-            (state.sigma_L, state.sigma_L, sigma_L),
-            pieces,
-            self.E_L1,
-            self.E_L2,
-            self.eta_L2,
-            self.E_L3,
-            self.eta_L3,
-        )
-        unloading = family_step(
-            state.q_UL2,
-            state.q_UL3,
-            (
-                state.stress - state.sigma_L,
-                stress_split - state.sigma_L,
-                stress - sigma_L,
-            ),
-            pieces,
-            self.E_UL1,
-            self.E_UL2,
-            self.eta_UL2,
-            self.E_UL3,
-            self.eta_UL3,
-        )
-        new_state = FiveElementState(
-            stress=stress,
-            sigma_L=sigma_L,
-            q_L2=loading[1],
-            q_L3=loading[2],
-            q_UL2=unloading[1],
-            q_UL3=unloading[2],
-        )
-        return new_state, superposed_strain(loading, unloading)

@@ -14,7 +14,11 @@ from jaxtyping import Array, Float, Int, PRNGKeyArray
 
 from .._cable import Cable
 from .._drive import Protocol
-from .._progress import Progress
+from .._progress import (
+    AbstractProgressMeter,
+    TextProgressMeter,
+    check_progress_meter,
+)
 from .inputs import (
     ForceHistory,
     check_cables,
@@ -131,7 +135,7 @@ def monte_carlo(
     bins: int = 1024,
     keep_draws: bool = False,
     devices: Sequence[jax.Device] | None = None,
-    progress: bool = True,
+    progress_meter: AbstractProgressMeter | None = None,
 ) -> MonteCarloResult:
     """Monte-Carlo of a set of cables over parameter draws: percentiles of elongation
     over time.
@@ -203,7 +207,9 @@ def monte_carlo(
     - `bins`: histogram bins per (cable, sample) (`method="histogram"`).
     - `keep_draws`: with `method="exact"`, return every draw in `elongation`.
     - `devices`: the devices to shard the draws over (default `jax.devices()`).
-    - `progress`: print a progress bar on stderr.
+    - `progress_meter`: how progress is shown (default
+        [`jaxcable.TextProgressMeter`][]: a bar on stderr, kept at the end;
+        [`jaxcable.NoProgressMeter`][]: nothing).
 
     **Returns:**
 
@@ -222,8 +228,7 @@ def monte_carlo(
             f"`method` must be 'auto', 'exact' or 'histogram', got {method!r}."
         )
     bins = check_int("bins", bins, 2)
-    if not isinstance(progress, bool):
-        raise ValueError(f"`progress` must be a bool, got {progress!r}.")
+    meter = check_progress_meter(progress_meter, TextProgressMeter())
     cables = check_cables(cables)
     loads, load_axis, samples = check_loads(loads, cables)
     ncables = cables.length.shape[0]
@@ -296,9 +301,7 @@ def monte_carlo(
         kept = np.empty((num_chunks * chunk, ncables, samples), np.dtype(dtype))
         kept_valid = np.empty((num_chunks * chunk, ncables), bool)
     stats = fresh()
-    with Progress(
-        "monte_carlo", num_chunks, enabled=progress, eta=True, keep=True
-    ) as bar:
+    with meter.bar("monte_carlo", num_chunks, eta=True, keep=True) as bar:
         for c in range(num_chunks):
             out = run(c, stats, lo_dev, width_dev)
             if exact:

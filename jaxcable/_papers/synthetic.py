@@ -8,7 +8,7 @@ import numpy as np
 from .._cable import Cable
 from .._drive import (
     Protocol,
-    simulate_elongation_history,
+    as_test_drive,
     simulate_force_history,
     simulate_rate_test,
 )
@@ -111,7 +111,7 @@ def synthesize_history(
     time: np.ndarray,
     imposed: np.ndarray,
     *,
-    drive: str,
+    drive,
     seed: int,
     relative_noise: float = 0.005,
     metadata: dict | None = None,
@@ -125,7 +125,9 @@ def synthesize_history(
     - `time`: sample times, s.
     - `imposed`: the imposed force (N, `drive="force"`: a creep test) or elongation
         (m, `drive="elongation"`: relaxation, a constant crosshead rate).
-    - `drive`: `"force"` or `"elongation"`; written as the `control` metadata.
+    - `drive`: [`jaxcable.FORCE_DRIVEN`][] or [`jaxcable.ELONGATION_DRIVEN`][], or
+        its name (`"force"`, `"elongation"`); its name is written as the `control`
+        metadata.
     - `seed`: seed of the noise (NumPy `default_rng`).
     - `relative_noise`: the noise standard deviation as a fraction of the response's
         peak (0.5 %); forces stay >= 0.
@@ -136,28 +138,24 @@ def synthesize_history(
     `(test, sigma)`: the [`jaxcable.TestData`][] and the noise standard deviation (m
     or N).
     """
+    drive = as_test_drive(drive)
     time = np.asarray(time, float)
     imposed = np.asarray(imposed, float)
     rng = np.random.default_rng(seed)
     meta = {
         "length_mm": float(cable.length) * 1e3,
         "diameter_mm": float(cable.diameter) * 1e3,
-        "control": drive,
+        "control": drive.name,
         **(metadata or {}),
     }
-    if drive == "force":
-        clean = np.asarray(
-            simulate_force_history(model, cable, time, imposed).elongation
-        )
-        sigma = relative_noise * float(np.max(np.abs(clean)))
-        measured = clean + sigma * rng.standard_normal(time.size)
-        return TestData(time, imposed, measured, metadata=meta), sigma
-    if drive != "elongation":
-        raise ValueError(f"`drive` must be 'force' or 'elongation', got {drive!r}.")
-    clean = np.asarray(simulate_elongation_history(model, cable, time, imposed).force)
+    clean = np.asarray(drive.scored_of(drive.simulate(model, cable, time, imposed)))
     sigma = relative_noise * float(np.max(np.abs(clean)))
-    measured = np.clip(clean + sigma * rng.standard_normal(time.size), 0.0, None)
-    return TestData(time, measured, imposed, metadata=meta), sigma
+    measured = clean + sigma * rng.standard_normal(time.size)
+    if drive.scores_force:
+        measured = np.clip(measured, 0.0, None)
+    channels = {drive.imposed: imposed, drive.scored: measured}
+    test = TestData(time, channels["force"], channels["elongation"], metadata=meta)
+    return test, sigma
 
 
 # The bundled data set: Park's protocol at two lengths, two crosshead speeds and two

@@ -1,5 +1,4 @@
 from .._diagnose import model_elongations as model_elongations
-from .._progress import Progress as Progress
 from .diagnosis_report import (
     DIAGNOSIS_REPORT_FILES as DIAGNOSIS_REPORT_FILES,
     write_diagnosis_report as write_diagnosis_report,

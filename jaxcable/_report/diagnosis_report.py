@@ -9,6 +9,7 @@ import pathlib
 import numpy as np
 
 from .._diagnose import MIN_GAIN_PCT, Diagnosis, heldout_start, scored_residuals
+from .._drive import FORCE_DRIVEN
 from .._files import write_text_atomic
 from .._fit import as_test_list
 from .plots import panels, residual_axes, save_png, time_axis
@@ -28,7 +29,7 @@ DIAGNOSIS_REPORT_FILES = (
 def _residuals(result, diagnosis: Diagnosis, tests: list) -> list[np.ndarray]:
     """Model minus measured value of every test's scored channel, in the diagnosis's
     unit (mm of elongation, N of force, or noise units)."""
-    drives = diagnosis.drives or ("force",) * len(tests)
+    drives = diagnosis.drives or (FORCE_DRIVEN,) * len(tests)
     scales = diagnosis.scales or (1.0,) * len(tests)
     factor = 1e3 if diagnosis.unit == "mm" else 1.0
     return [factor * r for r in scored_residuals(result, tests, drives, scales)]

@@ -13,7 +13,7 @@ import numpy as np
 from .._files import write_text_atomic
 from .._fit import FitResult, model_responses
 from .._io import TestData
-from .._progress import Progress
+from .._progress import AbstractProgressMeter, NoProgressMeter
 from .plots import plot_loops, plot_residuals
 
 
@@ -49,11 +49,7 @@ def summary_markdown(
     The markdown text.
     """
     n = int(np.sum(result.num_samples))
-    status = (
-        f"converged in {result.num_steps} steps"
-        if result.converged
-        else f"**not converged** ({result.message})"
-    )
+    status = result.outcome_text("**not converged**")
     lines = [
         f"# {title}",
         "",
@@ -81,7 +77,7 @@ def summary_markdown(
         source = pathlib.Path(test.source).name if test.source else ""
         masked = int(np.sum(~test.mask))
         value, unit = result.rmse(i)
-        drive = result.drives[i] if result.drives else "force"
+        drive = result.drive(i).name
         lines.append(
             f"| {result.test_ids[i]} | {source} | {drive} | "
             f"{int(result.num_samples[i])} | {masked} | {value:.4g} {unit} | "
@@ -129,7 +125,7 @@ def write_report(
     *,
     title: str = "jaxcable fit",
     notes: Sequence[str] = (),
-    progress: bool = False,
+    progress_meter: AbstractProgressMeter = NoProgressMeter(),
 ) -> list[pathlib.Path]:
     """Write the fit report to the folder `out` (created if needed).
 
@@ -144,14 +140,14 @@ def write_report(
     - `result`: the [`jaxcable.FitResult`][] of `tests`.
     - `tests`: the tests, as fitted.
     - `title`, `notes`: as in [`summary_markdown`][].
-    - `progress`: whether to draw a progress bar on stderr.
+    - `progress_meter`: how to show progress (default none).
 
     **Returns:**
 
     The paths written.
     """
     out.mkdir(parents=True, exist_ok=True)
-    with Progress("report", 3, enabled=progress) as bar:
+    with progress_meter.bar("report", 3) as bar:
         model = model_responses(result, tests)
         bar.advance(note="simulated")
         loops, resid = (out / name for name in FIT_REPORT_FILES[:2])
@@ -184,7 +180,7 @@ def write_report(
             [
                 result.test_ids[i],
                 pathlib.Path(test.source).name if test.source else "",
-                result.drives[i] if result.drives else "force",
+                result.drive(i).name,
                 int(result.num_samples[i]),
                 int(np.sum(~test.mask)),
                 f"{value:.6g}" if unit == "mm" else "",

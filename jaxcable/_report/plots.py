@@ -83,10 +83,6 @@ def residual_axes(ax, title: str, label: str, log: bool, unit: str = "mm") -> No
     ax.grid(alpha=0.3)
 
 
-def _drive(result: FitResult, i: int) -> str:
-    return result.drives[i] if result.drives else "force"
-
-
 def plot_loops(
     path, result: FitResult, tests: Sequence[TestData], model: Sequence[np.ndarray]
 ) -> None:
@@ -106,10 +102,17 @@ def plot_loops(
                 lw=0.8,
                 label="masked (not fitted)",
             )
-        if _drive(result, i) == "force":
-            ax.plot(1e3 * response, test.force, color="tab:blue", lw=1.0, label="model")
-        else:
-            ax.plot(e, response, color="tab:blue", lw=1.0, label="model")
+        drive = result.drive(i)
+        # The model's value replaces the scored channel (in the plot's units).
+        axes_of = {"elongation": e, "force": test.force}
+        axes_of[drive.scored] = drive.report_scale * response
+        ax.plot(
+            axes_of["elongation"],
+            axes_of["force"],
+            color="tab:blue",
+            lw=1.0,
+            label="model",
+        )
         value, unit = result.rmse(i)
         ax.set_title(
             f"{result.test_ids[i]}\nRMSE {value:.3g} {unit} "
@@ -133,10 +136,9 @@ def plot_residuals(
     fig, axes = panels(len(tests), 3.6, 2.6, 0.6)
     for i, (ax, test, response) in enumerate(zip(axes, tests, model)):
         t, label, log = time_axis(test.time)
-        if _drive(result, i) == "force":
-            r, unit = 1e3 * (response - test.elongation), "mm"
-        else:
-            r, unit = response - test.force, "N"
+        drive = result.drive(i)
+        r = drive.report_scale * (response - drive.scored_of(test))
+        unit = drive.report_unit
         ax.plot(t, np.where(test.mask, r, np.nan), color="tab:blue", lw=0.8)
         if not test.mask.all():
             ax.plot(

@@ -2,23 +2,18 @@ r"""Extensions for what a test shows besides the cable's own creep: the terminat
 compliance ([`TerminationCompliance`][]), the constructional stretch of a new braid
 ([`BeddingIn`][]) and a drift of the elongation signal ([`SensorDrift`][])."""
 
-from typing import ClassVar
-
 import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, Float, Int, PyTree
 
-from ... import _checks
-from ..._arrays import field_array
 from ..._cable import Cable
-from ..._results import RESULTS
 from ..base import (
-    AbstractCableModel,
     AbstractExtension,
     StrainParts,
     add_parts,
     state_zero,
 )
+from ..fields import parameter, setting, signed_effect
 
 
 # ----------------------------------------------------------------------------------
@@ -49,37 +44,14 @@ class TerminationCompliance(AbstractExtension[PyTree]):
     `wrap(base)` starts a fit at `compliance = 1e-6 m/N` (0.1 mm at 100 N).
     """
 
-    EXTENSION_ID: ClassVar[str] = "termination_compliance"
-    EFFECT_FIELDS: ClassVar[tuple[str, ...]] = ("compliance",)
-    SIZE_FIELD: ClassVar[str] = "compliance"
-    SIZE_UNIT: ClassVar[str] = "m/N"
-    SIZE_NULL: ClassVar[float] = 0.0
-    FIT_INFO: ClassVar[dict[str, tuple]] = {"compliance": ("log", "m/N", -1.0)}
+    CLI_NAME = "termination-compliance"
 
-    base: AbstractCableModel
-    compliance: Float[Array, ""] = eqx.field(converter=field_array, default=0.0)
-
-    def __check_init__(self):
-        _checks.check_parameters(
-            "TerminationCompliance",
-            self,
-            ("compliance",),
-            allow_zero=True,
-            reason="(m/N)",
-            qualified=False,
-        )
-
-    @classmethod
-    def wrap(cls, base: AbstractCableModel) -> "TerminationCompliance":
-        """`base` with a fit's start value `compliance = 1e-6` m/N."""
-        return cls(base, compliance=1e-6)
+    compliance: Float[Array, ""] = parameter(
+        0.0, unit="m/N", domain="nonnegative", stiffness=-1.0, null=0.0, start=1e-6
+    )
 
     def init(self, cable: Cable) -> PyTree:
         return self.base.init(cable)
-
-    def check(self, cable: Cable) -> RESULTS:
-        ok = _checks.parameters_ok(self, ("compliance",), allow_zero=True)
-        return _checks.domain_result(ok, self.base.check(cable))
 
     def advance(
         self,
@@ -151,48 +123,16 @@ class BeddingIn(AbstractExtension[BeddingInState]):
     `F_b = 50 N`.
     """
 
-    EXTENSION_ID: ClassVar[str] = "bedding_in"
-    EFFECT_FIELDS: ClassVar[tuple[str, ...]] = ("s_b", "F_b")
-    SIZE_FIELD: ClassVar[str] = "s_b"
-    SIZE_UNIT: ClassVar[str] = "-"
-    SIZE_NULL: ClassVar[float] = 0.0
-    FIT_INFO: ClassVar[dict[str, tuple]] = {
-        "s_b": ("log", "-", -1.0),
-        "F_b": ("log", "N"),
-    }
+    CLI_NAME = "bedding-in"
 
-    base: AbstractCableModel
-    s_b: Float[Array, ""] = eqx.field(converter=field_array, default=0.0)
-    F_b: Float[Array, ""] = eqx.field(converter=field_array, default=50.0)
-    smoothing: Float[Array, ""] = eqx.field(converter=field_array, default=0.01)
-
-    def __check_init__(self):
-        _checks.check_parameters(
-            "BeddingIn",
-            self,
-            ("s_b",),
-            allow_zero=True,
-            reason="(strain)",
-            qualified=False,
-        )
-        _checks.check_parameters(
-            "BeddingIn", self, ("F_b", "smoothing"), reason="(N)", qualified=False
-        )
-
-    @classmethod
-    def wrap(cls, base: AbstractCableModel) -> "BeddingIn":
-        """`base` with a fit's start values `s_b = 1e-4`, `F_b = 50` N."""
-        return cls(base, s_b=1e-4, F_b=50.0)
+    s_b: Float[Array, ""] = parameter(
+        0.0, unit="-", domain="nonnegative", stiffness=-1.0, null=0.0, start=1e-4
+    )
+    F_b: Float[Array, ""] = parameter(50.0, unit="N", start=50.0)
+    smoothing: Float[Array, ""] = setting(0.01, unit="N")
 
     def init(self, cable: Cable) -> BeddingInState:
         return BeddingInState(self.base.init(cable), state_zero(cable, self.s_b))
-
-    def check(self, cable: Cable) -> RESULTS:
-        ok = _checks.all_ok(
-            _checks.parameters_ok(self, ("s_b",), allow_zero=True),
-            _checks.parameters_ok(self, ("F_b", "smoothing")),
-        )
-        return _checks.domain_result(ok, self.base.check(cable))
 
     def advance(
         self,
@@ -248,39 +188,14 @@ class SensorDrift(AbstractExtension[SensorDriftState]):
     transform scaled by that start).
     """
 
-    EXTENSION_ID: ClassVar[str] = "sensor_drift"
-    EFFECT_FIELDS: ClassVar[tuple[str, ...]] = ("drift_rate",)
-    SIZE_FIELD: ClassVar[str] = "drift_rate"
-    SIZE_UNIT: ClassVar[str] = "m/s"
-    SIZE_NULL: ClassVar[float] = 0.0
-    FIT_INFO: ClassVar[dict[str, tuple]] = {"drift_rate": ("linear", "m/s")}
+    CLI_NAME = "sensor-drift"
 
-    base: AbstractCableModel
-    drift_rate: Float[Array, ""] = eqx.field(converter=field_array, default=0.0)
-
-    def __check_init__(self):
-        _checks.check_parameters(
-            "SensorDrift",
-            self,
-            ("drift_rate",),
-            positive=False,
-            reason="(m/s)",
-            qualified=False,
-        )
-
-    @classmethod
-    def wrap(cls, base: AbstractCableModel) -> "SensorDrift":
-        """`base` with a fit's start value `drift_rate = 1e-9` m/s."""
-        return cls(base, drift_rate=1e-9)
+    drift_rate: Float[Array, ""] = signed_effect("m/s", start=1e-9)
 
     def init(self, cable: Cable) -> SensorDriftState:
         return SensorDriftState(
             self.base.init(cable), state_zero(cable, self.drift_rate)
         )
-
-    def check(self, cable: Cable) -> RESULTS:
-        ok = _checks.parameters_ok(self, ("drift_rate",), positive=False)
-        return _checks.domain_result(ok, self.base.check(cable))
 
     def advance(
         self,

@@ -20,25 +20,15 @@ add nothing. They are not candidates of the diagnosis's catalogue
 [`jaxcable.COVARIATE_EXTENSIONS`][] lists them.
 """
 
-from typing import ClassVar
-
 import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int, PyTree
 
-from ... import _checks
-from ..._arrays import field_array
 from ..._cable import Cable
-from ..._results import RESULTS
-from ..base import (
-    AbstractCableModel,
-    AbstractExtension,
-    StrainParts,
-    add_parts,
-    covariate_of,
-    state_zero,
-)
-from .temperature import advance_shifted, check_shifted
+from .. import base as _base
+from ..base import AbstractExtension, StrainParts
+from ..fields import setting, signed_effect
+from .temperature import AbstractTimeShift
 
 
 class CovariateStrainState(eqx.Module):
@@ -73,38 +63,14 @@ class CovariateStrain(AbstractExtension[CovariateStrainState]):
     by that start).
     """
 
-    EXTENSION_ID: ClassVar[str] = "covariate_strain"
-    EFFECT_FIELDS: ClassVar[tuple[str, ...]] = ("alpha",)
-    SIZE_FIELD: ClassVar[str] = "alpha"
-    SIZE_UNIT: ClassVar[str] = "1/[c]"
-    SIZE_NULL: ClassVar[float] = 0.0
-    FIT_INFO: ClassVar[dict[str, tuple]] = {"alpha": ("linear", "1/[c]")}
+    CLI_NAME = "covariate-strain"
+    LIBRARY_TERM = "c_rate"
 
-    base: AbstractCableModel
-    alpha: Float[Array, ""] = eqx.field(converter=field_array, default=0.0)
-
-    def __check_init__(self):
-        _checks.check_parameters(
-            "CovariateStrain",
-            self,
-            ("alpha",),
-            positive=False,
-            reason="(1/[c])",
-            qualified=False,
-        )
-
-    @classmethod
-    def wrap(cls, base: AbstractCableModel) -> "CovariateStrain":
-        """`base` with a fit's start value `alpha = 1e-5` per unit."""
-        return cls(base, alpha=1e-5)
+    alpha: Float[Array, ""] = signed_effect("1/[c]", start=1e-5)
 
     def init(self, cable: Cable) -> CovariateStrainState:
-        zero = state_zero(cable, self.alpha)
+        zero = _base.state_zero(cable, self.alpha)
         return CovariateStrainState(self.base.init(cable), jnp.array(False), zero)
-
-    def check(self, cable: Cable) -> RESULTS:
-        ok = _checks.parameters_ok(self, ("alpha",), positive=False)
-        return _checks.domain_result(ok, self.base.check(cable))
 
     def advance(
         self,
@@ -115,11 +81,11 @@ class CovariateStrain(AbstractExtension[CovariateStrainState]):
         direction: Int[Array, ""],
     ) -> tuple[CovariateStrainState, StrainParts]:
         base_state, parts = self.base.advance(state.base, cable, dt, force, direction)
-        c = covariate_of(cable, state.first)
+        c = _base.covariate_of(cable, state.first)
         first = jnp.where(state.started, state.first, c)
         strain = self.alpha * (c - first)
         new = CovariateStrainState(base_state, jnp.array(True), first)
-        return new, add_parts(parts, instantaneous=strain)
+        return new, _base.add_parts(parts, instantaneous=strain)
 
 
 class MechanoSorptiveState(eqx.Module):
@@ -161,40 +127,16 @@ class MechanoSorptive(AbstractExtension[MechanoSorptiveState]):
     10 units of change at 100 N on a 3 mm cable).
     """
 
-    EXTENSION_ID: ClassVar[str] = "mechano_sorptive"
-    EFFECT_FIELDS: ClassVar[tuple[str, ...]] = ("m",)
-    SIZE_FIELD: ClassVar[str] = "m"
-    SIZE_UNIT: ClassVar[str] = "1/(Pa [c])"
-    SIZE_NULL: ClassVar[float] = 0.0
-    FIT_INFO: ClassVar[dict[str, tuple]] = {"m": ("linear", "1/(Pa [c])")}
+    CLI_NAME = "mechano-sorptive"
+    LIBRARY_TERM = "sigma_c_abs_rate"
 
-    base: AbstractCableModel
-    m: Float[Array, ""] = eqx.field(converter=field_array, default=0.0)
-
-    def __check_init__(self):
-        _checks.check_parameters(
-            "MechanoSorptive",
-            self,
-            ("m",),
-            positive=False,
-            reason="(1/(Pa [c]))",
-            qualified=False,
-        )
-
-    @classmethod
-    def wrap(cls, base: AbstractCableModel) -> "MechanoSorptive":
-        """`base` with a fit's start value `m = 1e-12` 1/(Pa [c])."""
-        return cls(base, m=1e-12)
+    m: Float[Array, ""] = signed_effect("1/(Pa [c])", start=1e-12)
 
     def init(self, cable: Cable) -> MechanoSorptiveState:
-        zero = state_zero(cable, self.m)
+        zero = _base.state_zero(cable, self.m)
         return MechanoSorptiveState(
             self.base.init(cable), jnp.array(False), zero, zero, zero
         )
-
-    def check(self, cable: Cable) -> RESULTS:
-        ok = _checks.parameters_ok(self, ("m",), positive=False)
-        return _checks.domain_result(ok, self.base.check(cable))
 
     def advance(
         self,
@@ -205,16 +147,16 @@ class MechanoSorptive(AbstractExtension[MechanoSorptiveState]):
         direction: Int[Array, ""],
     ) -> tuple[MechanoSorptiveState, StrainParts]:
         base_state, parts = self.base.advance(state.base, cable, dt, force, direction)
-        c = covariate_of(cable, state.covariate)
+        c = _base.covariate_of(cable, state.covariate)
         # The first sample has no previous covariate: no change then.
         previous = jnp.where(state.started, state.covariate, c)
         sigma = 0.5 * (state.force + force) / cable.area
         strain = state.strain + self.m * sigma * jnp.abs(c - previous)
         new = MechanoSorptiveState(base_state, jnp.array(True), force, c, strain)
-        return new, add_parts(parts, creep=strain)
+        return new, _base.add_parts(parts, creep=strain)
 
 
-class CovariateShift(AbstractExtension[PyTree]):
+class CovariateShift(AbstractTimeShift):
     r"""The base on reduced time shifted by the covariate,
 
         dt_eff = dt / a(c),   log10 a = -k (c - c_ref),
@@ -239,54 +181,17 @@ class CovariateShift(AbstractExtension[PyTree]):
     `wrap(base)` starts a fit at `k = 1e-3` per unit, `c_ref = 0`.
     """
 
-    EXTENSION_ID: ClassVar[str] = "covariate_shift"
-    EFFECT_FIELDS: ClassVar[tuple[str, ...]] = ("k",)
-    SIZE_FIELD: ClassVar[str] = "k"
-    SIZE_UNIT: ClassVar[str] = "1/[c]"
-    SIZE_NULL: ClassVar[float] = 0.0
-    FIT_INFO: ClassVar[dict[str, tuple]] = {"k": ("linear", "1/[c]")}
+    CLI_NAME = "covariate-shift"
 
-    base: AbstractCableModel
-    k: Float[Array, ""] = eqx.field(converter=field_array, default=0.0)
-    c_ref: Float[Array, ""] = eqx.field(converter=field_array, default=0.0)
-
-    def __check_init__(self):
-        _checks.check_parameters(
-            "CovariateShift",
-            self,
-            ("k", "c_ref"),
-            positive=False,
-            reason="([c])",
-            qualified=False,
-        )
-
-    @classmethod
-    def wrap(cls, base: AbstractCableModel) -> "CovariateShift":
-        """`base` with a fit's start value `k = 1e-3` per unit."""
-        return cls(base, k=1e-3)
+    k: Float[Array, ""] = signed_effect("1/[c]", start=1e-3)
+    c_ref: Float[Array, ""] = setting(0.0, unit="[c]", domain="any")
 
     def log_shift(self, cable: Cable) -> Float[Array, ""]:
         """log10 a at the covariate of `cable`."""
-        return -self.k * (covariate_of(cable, self.k) - self.c_ref)
+        return -self.k * (_base.covariate_of(cable, self.k) - self.c_ref)
 
-    def init(self, cable: Cable) -> PyTree:
-        return self.base.init(cable)
+    def log_shift_at(self, cable: Cable) -> Float[Array, ""]:
+        return self.log_shift(cable)
 
-    def check(self, cable: Cable) -> RESULTS:
-        log_a = self.log_shift(cable)
-        ok = _checks.all_ok(
-            _checks.parameters_ok(self, ("k", "c_ref"), positive=False),
-            jnp.all(jnp.isfinite(log_a)),
-        )
-        return check_shifted(self.base, cable, ok, log_a)
-
-    def advance(
-        self,
-        state: PyTree,
-        cable: Cable,
-        dt: Float[Array, ""],
-        force: Float[Array, ""],
-        direction: Int[Array, ""],
-    ) -> tuple[PyTree, StrainParts]:
-        log_a = self.log_shift(cable)
-        return advance_shifted(self.base, state, cable, dt, force, direction, log_a)
+    def shift_ok(self, cable: Cable) -> Bool[Array, ""]:
+        return jnp.all(jnp.isfinite(self.log_shift(cable)))

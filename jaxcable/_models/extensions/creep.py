@@ -4,23 +4,21 @@ Kelvin-Voigt creep ([`Hereditary`][]), one more retardation time
 ([`StressNonlinearCreep`][])."""
 
 import math
-from typing import ClassVar
 
 import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, Float, Int, PyTree
 
-from ... import _checks
-from ..._arrays import field_array
 from ..._cable import Cable
-from ..._results import RESULTS
 from ..base import (
     AbstractCableModel,
     AbstractExtension,
     StrainParts,
     add_parts,
+    innermost,
     state_zero,
 )
+from ..fields import MODULUS, parameter, setting
 from ..kernels import (
     relaxation_average,
     relaxation_terms,
@@ -32,13 +30,10 @@ from ..park import IntegratedModel
 
 
 def innermost_integrated(model: AbstractCableModel) -> IntegratedModel | None:
-    """The first [`jaxcable.IntegratedModel`][] found by following `.base` through
-    the extensions around it, `model` itself included, or None."""
-    while not isinstance(model, IntegratedModel):
-        if not isinstance(model, AbstractExtension):
-            return None
-        model = model.base
-    return model
+    """The [`jaxcable.IntegratedModel`][] at the core of the extensions around
+    `model` (`model` itself included), or None."""
+    core = innermost(model)
+    return core if isinstance(core, IntegratedModel) else None
 
 
 # ----------------------------------------------------------------------------------
@@ -126,20 +121,13 @@ class Hereditary(AbstractExtension[HereditaryState]):
     `wrap(base)` starts a fit at `weight = 0.1`.
     """
 
-    EXTENSION_ID: ClassVar[str] = "hereditary"
-    EFFECT_FIELDS: ClassVar[tuple[str, ...]] = ("weight",)
-    SIZE_FIELD: ClassVar[str] = "weight"
-    SIZE_UNIT: ClassVar[str] = "-"
-    SIZE_NULL: ClassVar[float] = 0.0
-    FIT_INFO: ClassVar[dict[str, tuple]] = {"weight": ("log", "-")}
+    CLI_NAME = "hereditary"
 
-    base: AbstractCableModel
-    weight: Float[Array, ""] = eqx.field(converter=field_array, default=1.0)
+    weight: Float[Array, ""] = parameter(
+        1.0, unit="-", domain="nonnegative", null=0.0, start=0.1
+    )
 
-    def __check_init__(self):
-        _checks.check_parameters(
-            "Hereditary", self, ("weight",), allow_zero=True, qualified=False
-        )
+    def check_more(self):
         if innermost_integrated(self.base) is None:
             raise ValueError(
                 f"Hereditary needs a base containing an IntegratedModel (its "
@@ -148,18 +136,9 @@ class Hereditary(AbstractExtension[HereditaryState]):
                 "exact."
             )
 
-    @classmethod
-    def wrap(cls, base: AbstractCableModel) -> "Hereditary":
-        """`base` with a fit's start value `weight = 0.1`."""
-        return cls(base, weight=0.1)
-
     def init(self, cable: Cable) -> HereditaryState:
         zero = state_zero(cable, self.weight)
         return HereditaryState(self.base.init(cable), zero, zero, zero, zero, zero)
-
-    def check(self, cable: Cable) -> RESULTS:
-        ok = _checks.parameters_ok(self, ("weight",), allow_zero=True)
-        return _checks.domain_result(ok, self.base.check(cable))
 
     def advance(
         self,
@@ -241,48 +220,21 @@ class SecondRetardation(AbstractExtension[SecondRetardationState]):
     a day's rest).
     """
 
-    EXTENSION_ID: ClassVar[str] = "second_retardation"
-    EFFECT_FIELDS: ClassVar[tuple[str, ...]] = ("E_k", "tau_k")
-    SIZE_FIELD: ClassVar[str] = "E_k"
-    SIZE_UNIT: ClassVar[str] = "Pa"
-    SIZE_NULL: ClassVar[float] = math.inf
-    FIT_INFO: ClassVar[dict[str, tuple]] = {
-        "E_k": ("log", "Pa", 1.0),
-        "tau_k": ("log", "s"),
-    }
+    CLI_NAME = "second-retardation"
 
-    base: AbstractCableModel
-    E_k: Float[Array, ""] = eqx.field(converter=field_array, default=jnp.inf)
-    tau_k: Float[Array, ""] = eqx.field(converter=field_array, default=1000.0)
-
-    def __check_init__(self):
-        _checks.check_parameters(
-            "SecondRetardation",
-            self,
-            ("E_k",),
-            allow_inf=True,
-            reason="(Pa; inf switches the element off)",
-            qualified=False,
-        )
-        _checks.check_parameters(
-            "SecondRetardation", self, ("tau_k",), reason="(s)", qualified=False
-        )
-
-    @classmethod
-    def wrap(cls, base: AbstractCableModel) -> "SecondRetardation":
-        """`base` with a fit's start values `E_k = 1e10` Pa, `tau_k = 1000` s."""
-        return cls(base, E_k=1e10, tau_k=1000.0)
+    E_k: Float[Array, ""] = parameter(
+        jnp.inf,
+        **MODULUS,
+        domain="positive_or_inf",
+        null=math.inf,
+        note="(Pa; inf switches the element off)",
+        start=1e10,
+    )
+    tau_k: Float[Array, ""] = parameter(1000.0, unit="s", start=1000.0)
 
     def init(self, cable: Cable) -> SecondRetardationState:
         zero = state_zero(cable, self.E_k)
         return SecondRetardationState(self.base.init(cable), zero, zero)
-
-    def check(self, cable: Cable) -> RESULTS:
-        ok = _checks.all_ok(
-            _checks.parameters_ok(self, ("E_k",), allow_inf=True),
-            _checks.parameters_ok(self, ("tau_k",)),
-        )
-        return _checks.domain_result(ok, self.base.check(cable))
 
     def advance(
         self,
@@ -375,46 +327,16 @@ class StressNonlinearCreep(AbstractExtension[StressNonlinearCreepState]):
     `wrap(base)` starts a fit at `n = 0.1`.
     """
 
-    EXTENSION_ID: ClassVar[str] = "stress_nonlinear_creep"
-    EFFECT_FIELDS: ClassVar[tuple[str, ...]] = ("n",)
-    SIZE_FIELD: ClassVar[str] = "n"
-    SIZE_UNIT: ClassVar[str] = "-"
-    SIZE_NULL: ClassVar[float] = 0.0
-    FIT_INFO: ClassVar[dict[str, tuple]] = {"n": ("log", "-")}
+    CLI_NAME = "stress-nonlinear-creep"
 
-    base: AbstractCableModel
-    n: Float[Array, ""] = eqx.field(converter=field_array, default=0.0)
-    stress_ref: Float[Array, ""] = eqx.field(
-        converter=field_array, default=DEFAULT_STRESS_REF
+    n: Float[Array, ""] = parameter(
+        0.0, unit="-", domain="nonnegative", null=0.0, start=0.1
     )
-
-    def __check_init__(self):
-        _checks.check_parameters(
-            "StressNonlinearCreep", self, ("n",), allow_zero=True, qualified=False
-        )
-        _checks.check_parameters(
-            "StressNonlinearCreep",
-            self,
-            ("stress_ref",),
-            reason="(Pa)",
-            qualified=False,
-        )
-
-    @classmethod
-    def wrap(cls, base: AbstractCableModel) -> "StressNonlinearCreep":
-        """`base` with a fit's start value `n = 0.1` (default `stress_ref`)."""
-        return cls(base, n=0.1)
+    stress_ref: Float[Array, ""] = setting(DEFAULT_STRESS_REF, unit="Pa")
 
     def init(self, cable: Cable) -> StressNonlinearCreepState:
         zero = state_zero(cable, self.n)
         return StressNonlinearCreepState(self.base.init(cable), zero, zero, zero)
-
-    def check(self, cable: Cable) -> RESULTS:
-        ok = _checks.all_ok(
-            _checks.parameters_ok(self, ("n",), allow_zero=True),
-            _checks.parameters_ok(self, ("stress_ref",)),
-        )
-        return _checks.domain_result(ok, self.base.check(cable))
 
     def advance(
         self,

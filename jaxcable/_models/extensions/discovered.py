@@ -8,24 +8,19 @@ both inside `advance` (scalars, traced) and host-side by the discovery on whole
 histories (arrays), so that the regression and the model integrate the same terms.
 """
 
-from typing import ClassVar
-
 import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, Float, Int, PyTree
 
-from ... import _checks
-from ..._arrays import field_array
 from ..._cable import Cable
-from ..._results import RESULTS
 from ..base import (
-    AbstractCableModel,
     AbstractExtension,
     StrainParts,
     add_parts,
     covariate_of,
     state_zero,
 )
+from ..fields import signed_effect
 from ..kernels import running_max, tension_time_step
 
 
@@ -109,6 +104,12 @@ def cycle_count(variation, force_max):
     return jnp.where(positive, variation / (2.0 * jnp.where(positive, force_max, 1)), 0)
 
 
+def _theta():
+    """A coefficient of [`DiscoveredTerm`][]: 1/s per unit of its term (either
+    sign; 0 by default: the term is off)."""
+    return signed_effect("1/s per unit of phi")
+
+
 class DiscoveredTermState(eqx.Module):
     """Scan carry of [`jaxcable.DiscoveredTerm`][] (SI; the covariate in its unit).
 
@@ -184,23 +185,15 @@ class DiscoveredTerm(AbstractExtension[DiscoveredTermState]):
     the instance to fit (`jaxcable.discover`).
     """
 
-    EXTENSION_ID: ClassVar[str] = "discovered"
-    EFFECT_FIELDS: ClassVar[tuple[str, ...]] = THETA_FIELDS
-    SIZE_FIELD: ClassVar[str] = "theta0"
-    SIZE_UNIT: ClassVar[str] = "1/s per unit of phi"
-    SIZE_NULL: ClassVar[float] = 0.0
-    FIT_INFO: ClassVar[dict[str, tuple]] = {
-        name: ("linear", "1/s per unit of phi") for name in THETA_FIELDS
-    }
+    CLI_NAME = "discovered"
 
-    base: AbstractCableModel
-    theta0: Float[Array, ""] = eqx.field(converter=field_array, default=0.0)
-    theta1: Float[Array, ""] = eqx.field(converter=field_array, default=0.0)
-    theta2: Float[Array, ""] = eqx.field(converter=field_array, default=0.0)
-    theta3: Float[Array, ""] = eqx.field(converter=field_array, default=0.0)
+    theta0: Float[Array, ""] = _theta()
+    theta1: Float[Array, ""] = _theta()
+    theta2: Float[Array, ""] = _theta()
+    theta3: Float[Array, ""] = _theta()
     terms: tuple[str, ...] = eqx.field(static=True, default=())
 
-    def __check_init__(self):
+    def check_more(self):
         terms = self.terms
         if not isinstance(terms, tuple) or len(terms) > MAX_TERMS:
             raise ValueError(
@@ -213,15 +206,6 @@ class DiscoveredTerm(AbstractExtension[DiscoveredTermState]):
                 f"DiscoveredTerm `terms` {terms!r}: each must be one of "
                 f"{list(TERMS)}, without repeats."
             )
-        for name in THETA_FIELDS:
-            value = getattr(self, name)
-            if _checks.is_concrete(value) and not bool(jnp.all(jnp.isfinite(value))):
-                raise ValueError(f"DiscoveredTerm `{name}` must be finite.")
-
-    @classmethod
-    def wrap(cls, base: AbstractCableModel) -> "DiscoveredTerm":
-        """`base` with no term (all thetas 0): the base itself."""
-        return cls(base)
 
     def used_fields(self) -> tuple[str, ...]:
         """The theta fields of the terms in use, `theta0`, ... (the ones to fit)."""
@@ -232,10 +216,6 @@ class DiscoveredTerm(AbstractExtension[DiscoveredTermState]):
         return DiscoveredTermState(
             self.base.init(cable), jnp.array(False), *([zero] * 7)
         )
-
-    def check(self, cable: Cable) -> RESULTS:
-        ok = jnp.all(jnp.isfinite(jnp.stack([getattr(self, n) for n in THETA_FIELDS])))
-        return _checks.domain_result(ok, self.base.check(cable))
 
     def advance(
         self,

@@ -4,17 +4,17 @@ reduced time, with the Arrhenius ([`TemperatureShift`][]) or the Williams-Landel
 
 import abc
 import math
-from typing import ClassVar
 
 import equinox as eqx
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, Bool, Float, Int, PyTree
 
 from ... import _checks
-from ..._arrays import field_array
 from ..._cable import Cable
 from ..._results import RESULTS
-from ..base import AbstractCableModel, AbstractExtension, StrainParts
+from ..base import AbstractExtension, StrainParts
+from ..fields import declared_ok, parameter, setting
 
 
 # Gas constant, J/(mol K).
@@ -61,66 +61,41 @@ def reduced_time(
     return dt / a_t, cable_reduced
 
 
-def check_shifted(
-    base: AbstractCableModel, cable: Cable, ok: Bool[Array, ""], log_a
-) -> RESULTS:
-    """The check of a time-shift extension (temperature or covariate): `ok`, whether
-    the shift is in its domain, and the base's check on reduced time, at a = 1
-    where the shift is out of its domain (the result is then
-    `parameter_out_of_domain` anyway)."""
-    _, reduced = reduced_time(cable, 0.0, jnp.where(ok, log_a, 0.0))
-    return _checks.domain_result(ok, base.check(reduced))
+def reference_temperature():
+    """The field `T_ref` of a temperature shift: the reference temperature, K (> 0;
+    default 293.15 K, the default `Cable.temperature`), at which a_T = 1."""
+    return setting(293.15, unit="K")
 
 
-def advance_shifted(
-    base: AbstractCableModel,
-    state: PyTree,
-    cable: Cable,
-    dt: Float[Array, ""],
-    force: Float[Array, ""],
-    direction: Int[Array, ""],
-    log_a: Float[Array, ""],
-) -> tuple[PyTree, StrainParts]:
-    """The step of a time-shift extension: the base's step on reduced time
-    (`reduced_time`), with shift log10 a = `log_a`."""
-    dt_eff, reduced = reduced_time(cable, dt, log_a)
-    return base.advance(state, reduced, dt_eff, force, direction)
+class AbstractTimeShift(AbstractExtension[PyTree]):
+    """The base on reduced time, dt_eff = dt / a with log10 a set by the cable's
+    conditions at each step (its temperature, a recorded covariate): every
+    time-dependent process of the base runs on reduced time, and the base gets a
+    cable whose crosshead speed is v a (the same strain per reduced second);
+    instantaneous strains are unchanged. The state is the base's.
 
-
-class AbstractTemperatureShift(AbstractExtension[PyTree]):
-    """Time-temperature superposition: every time-dependent process of the base runs
-    on reduced time dt_eff = dt / a_T(T), T = `cable.temperature` (K) read at each
-    step, and the base gets a cable whose crosshead speed is v a_T (the same strain
-    per reduced second). The state is the base's.
-
-    A concrete shift declares `base`, its own parameters and `T_ref` (the reference
-    temperature, K, at which a_T = 1), and implements `log_shift` and `shift_ok`.
+    A concrete shift implements `log_shift_at` and `shift_ok`.
     """
 
-    T_ref: eqx.AbstractVar[Float[Array, ""]]
-
-    def __check_init__(self):
-        _checks.check_parameters(
-            type(self).__name__, self, ("T_ref",), reason="(K)", qualified=False
-        )
-
     @abc.abstractmethod
-    def log_shift(self, temperature) -> Float[Array, "*shape"]:
-        """log10 a_T at `temperature` (K)."""
+    def log_shift_at(self, cable: Cable) -> Float[Array, ""]:
+        """log10 a at the conditions of `cable`."""
 
     @abc.abstractmethod
     def shift_ok(self, cable: Cable) -> Bool[Array, ""]:
-        """Traced: whether the shift's own parameters are in their domain at the
-        temperature of `cable` (`T_ref` is checked by `check`)."""
+        """Traced: whether the shift is in its domain at the conditions of `cable`
+        beyond the declared domains of its fields (which `check` tests)."""
 
     def init(self, cable: Cable) -> PyTree:
         return self.base.init(cable)
 
     def check(self, cable: Cable) -> RESULTS:
-        ok = _checks.all_ok(
-            self.shift_ok(cable), _checks.parameters_ok(self, ("T_ref",))
-        )
-        return check_shifted(self.base, cable, ok, self.log_shift(cable.temperature))
+        # The base is checked on reduced time, at a = 1 where the shift is out of
+        # its domain (the result is then `parameter_out_of_domain` anyway).
+        ok = _checks.all_ok(declared_ok(self), self.shift_ok(cable))
+        log_a = jnp.where(ok, self.log_shift_at(cable), 0.0)
+        _, reduced = reduced_time(cable, 0.0, log_a)
+        return _checks.domain_result(ok, self.base.check(reduced))
 
     def advance(
         self,
@@ -130,8 +105,28 @@ class AbstractTemperatureShift(AbstractExtension[PyTree]):
         force: Float[Array, ""],
         direction: Int[Array, ""],
     ) -> tuple[PyTree, StrainParts]:
-        log_a = self.log_shift(cable.temperature)
-        return advance_shifted(self.base, state, cable, dt, force, direction, log_a)
+        dt_eff, reduced = reduced_time(cable, dt, self.log_shift_at(cable))
+        return self.base.advance(state, reduced, dt_eff, force, direction)
+
+
+class AbstractTemperatureShift(AbstractTimeShift):
+    """Time-temperature superposition: the base on reduced time
+    ([`AbstractTimeShift`][]), dt_eff = dt / a_T(T), T = `cable.temperature` (K)
+    read at each step.
+
+    A concrete shift declares `base`, its own parameters and `T_ref` (the reference
+    temperature, K, at which a_T = 1: `reference_temperature()`), and implements
+    `log_shift` and `shift_ok`.
+    """
+
+    T_ref: eqx.AbstractVar[Float[Array, ""]]
+
+    @abc.abstractmethod
+    def log_shift(self, temperature) -> Float[Array, "*shape"]:
+        """log10 a_T at `temperature` (K)."""
+
+    def log_shift_at(self, cable: Cable) -> Float[Array, ""]:
+        return self.log_shift(cable.temperature)
 
 
 class TemperatureShift(AbstractTemperatureShift):
@@ -164,41 +159,35 @@ class TemperatureShift(AbstractTemperatureShift):
     above T_ref; thermally activated creep of UHMWPE is ~ 1e5 J/mol).
     """
 
-    EXTENSION_ID: ClassVar[str] = "temperature"
-    EFFECT_FIELDS: ClassVar[tuple[str, ...]] = ("activation_energy",)
-    SIZE_FIELD: ClassVar[str] = "activation_energy"
-    SIZE_UNIT: ClassVar[str] = "J/mol"
-    SIZE_NULL: ClassVar[float] = 0.0
-    FIT_INFO: ClassVar[dict[str, tuple]] = {"activation_energy": ("log", "J/mol")}
+    CLI_NAME = "temperature"
 
-    base: AbstractCableModel
-    activation_energy: Float[Array, ""] = eqx.field(converter=field_array, default=0.0)
-    T_ref: Float[Array, ""] = eqx.field(converter=field_array, default=293.15)
-
-    def __check_init__(self):
-        _checks.check_parameters(
-            "TemperatureShift",
-            self,
-            ("activation_energy",),
-            allow_zero=True,
-            reason="(J/mol)",
-            qualified=False,
-        )
+    activation_energy: Float[Array, ""] = parameter(
+        0.0, unit="J/mol", domain="nonnegative", null=0.0, start=1e4
+    )
+    T_ref: Float[Array, ""] = reference_temperature()
 
     @classmethod
-    def wrap(cls, base: AbstractCableModel) -> "TemperatureShift":
-        """`base` with a fit's start value `activation_energy = 1e4` J/mol."""
-        return cls(base, activation_energy=1e4)
+    def applicability(cls, tests) -> str:
+        """Not applicable unless every test records its temperature and the records
+        span at least 2 K (a temperature contrast)."""
+        temps = [
+            np.asarray(t.temperature, float)
+            for t in tests
+            if getattr(t, "temperature", None) is not None
+        ]
+        if len(temps) < len(tests):
+            return "not every test records its temperature"
+        span = float(np.ptp(np.concatenate(temps)))
+        if span < 2.0:
+            return f"the tests span {span:.2g} K: no temperature contrast"
+        return ""
 
     def log_shift(self, temperature) -> Float[Array, "*shape"]:
         """log10 a_T at `temperature` (K)."""
         return log_shift_arrhenius(temperature, self.activation_energy, self.T_ref)
 
     def shift_ok(self, cable: Cable) -> Bool[Array, ""]:
-        return _checks.all_ok(
-            _checks.parameters_ok(self, ("activation_energy",), allow_zero=True),
-            jnp.isfinite(self.log_shift(cable.temperature)),
-        )
+        return jnp.isfinite(self.log_shift(cable.temperature))
 
 
 class TemperatureShiftWLF(AbstractTemperatureShift):
@@ -224,38 +213,17 @@ class TemperatureShiftWLF(AbstractTemperatureShift):
     `wrap(base)` starts a fit at the "universal" C2 = 51.6 K and a small C1 = 1.
     """
 
-    EXTENSION_ID: ClassVar[str] = "temperature_wlf"
-    EFFECT_FIELDS: ClassVar[tuple[str, ...]] = ("c1", "c2")
-    SIZE_FIELD: ClassVar[str] = "c1"
-    SIZE_UNIT: ClassVar[str] = "-"
-    SIZE_NULL: ClassVar[float] = 0.0
-    FIT_INFO: ClassVar[dict[str, tuple]] = {"c1": ("log", "-"), "c2": ("log", "K")}
+    CLI_NAME = "temperature-wlf"
 
-    base: AbstractCableModel
-    c1: Float[Array, ""] = eqx.field(converter=field_array, default=0.0)
-    c2: Float[Array, ""] = eqx.field(converter=field_array, default=51.6)
-    T_ref: Float[Array, ""] = eqx.field(converter=field_array, default=293.15)
-
-    def __check_init__(self):
-        _checks.check_parameters(
-            "TemperatureShiftWLF", self, ("c1",), allow_zero=True, qualified=False
-        )
-        _checks.check_parameters(
-            "TemperatureShiftWLF", self, ("c2",), reason="(K)", qualified=False
-        )
-
-    @classmethod
-    def wrap(cls, base: AbstractCableModel) -> "TemperatureShiftWLF":
-        """`base` with a fit's start values `c1 = 1`, `c2 = 51.6` K."""
-        return cls(base, c1=1.0, c2=51.6)
+    c1: Float[Array, ""] = parameter(
+        0.0, unit="-", domain="nonnegative", null=0.0, start=1.0
+    )
+    c2: Float[Array, ""] = parameter(51.6, unit="K", start=51.6)
+    T_ref: Float[Array, ""] = reference_temperature()
 
     def log_shift(self, temperature) -> Float[Array, "*shape"]:
         """log10 a_T at `temperature` (K)."""
         return log_shift_wlf(temperature, self.c1, self.c2, self.T_ref)
 
     def shift_ok(self, cable: Cable) -> Bool[Array, ""]:
-        return _checks.all_ok(
-            _checks.parameters_ok(self, ("c1",), allow_zero=True),
-            _checks.parameters_ok(self, ("c2",)),
-            self.c2 + cable.temperature - self.T_ref > 0,
-        )
+        return self.c2 + cable.temperature - self.T_ref > 0
