@@ -25,5 +25,7 @@ from ._papers import (
     park_protocol as park_protocol,
     sk78_qualitative_checks as sk78_qualitative_checks,
     sk78_targets_report as sk78_targets_report,
+    synthesize as synthesize,
+    synthesize_history as synthesize_history,
     truth_elongations as truth_elongations,
 )

@@ -13,7 +13,7 @@ import pytest
 
 import jaxcable as jc
 from jaxcable._cache import cache_size
-from jaxcable._cli import main
+from jaxcable.cli import main
 
 
 def _run(code: str, env: dict) -> subprocess.CompletedProcess:
@@ -33,7 +33,7 @@ def _cli_env(tmp_path, **extra):
 
 _SIMULATE = """
 import sys
-from jaxcable._cli import main
+from jaxcable.cli import main
 sys.exit(main(["simulate", {protocol!r}, "--out", {out!r}]))
 """
 
@@ -109,7 +109,7 @@ def test_importing_jaxcable_leaves_the_cache_off(tmp_path):
 
 _FIT = """
 import sys
-from jaxcable._cli import main
+from jaxcable.cli import main
 sys.exit(main({argv!r}))
 """
 

@@ -12,9 +12,9 @@ import pytest
 
 import jaxcable as jc
 from jaxcable._cli import demo as cli_demo
-from jaxcable._cli.main import main
 from jaxcable._models import BY_CLI_NAME
 from jaxcable._papers import synthetic as _synthetic
+from jaxcable.cli import main
 
 
 # One load-unload-reload history; every simulate test uses this length so that the
@@ -675,10 +675,9 @@ def test_fit_params_model_mismatch(burgers_fit, tmp_path, capsys):
 
 
 def test_progress_bar():
-    from jaxcable._progress import NoProgressMeter, TextProgressMeter
 
     stream, log = io.StringIO(), io.StringIO()
-    meter = TextProgressMeter(log=log, stream=stream)
+    meter = jc.TextProgressMeter(log=log, stream=stream)
     with meter.bar("reading", 4) as bar:
         bar.advance(note="a.csv")
         meter.say("fitting candidate x")
@@ -688,8 +687,8 @@ def test_progress_bar():
     assert "] 4/4" in text
     assert text.endswith("\r")  # the bar is erased at the end
     assert log.getvalue() == "fitting candidate x\n"
-    quiet = TextProgressMeter(show_bar=False, stream=io.StringIO())
-    for silent in (quiet, NoProgressMeter()):
+    quiet = jc.TextProgressMeter(show_bar=False, stream=io.StringIO())
+    for silent in (quiet, jc.NoProgressMeter()):
         with silent.bar("fitting") as bar:
             bar.advance()
         silent.say("nothing")
@@ -709,7 +708,7 @@ _DEMO_FIT = "E1c,E2c,eta0"
 
 
 def _small_dataset(folder):
-    from jaxcable._papers import park_protocol, synthesize
+    from jaxcable.papers import park_protocol, synthesize
 
     folder.mkdir()
     for k, (length, force) in enumerate(((100.0, 100.0), (300.0, 150.0))):
@@ -868,7 +867,7 @@ def test_every_model_simulates_a_protocol(tmp_path, name):
 def test_console_entry_freezes_the_imports_and_exits_with_mains_status(monkeypatch):
     # `jaxcable` and `python -m jaxcable` run `entry`: it freezes the objects of the
     # imports (the collector then skips them), then exits with main's status.
-    cli_main = importlib.import_module("jaxcable._cli.main")
+    cli_main = importlib.import_module("jaxcable.cli")
     calls = []
     monkeypatch.setattr(cli_main.gc, "freeze", lambda: calls.append("freeze"))
     monkeypatch.setattr(cli_main, "main", lambda: calls.append("main") or 2)

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import jaxcable as jc
-from jaxcable._cli import main
+from jaxcable.cli import main
 
 
 _GOOD_PROTOCOL = {

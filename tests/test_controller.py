@@ -5,13 +5,8 @@ import numpy as np
 import pytest
 
 import jaxcable as jc
-from jaxcable._drive.controller import (
-    ControllerState,
-    LiveFiveElement,
-    controller_init,
-    controller_step,
-)
-from jaxcable._models.extensions import TerminationCompliance
+from jaxcable import LiveFiveElement, controller_init, controller_step
+from jaxcable.states import ControllerState
 
 from .helpers import tree_allclose
 
@@ -63,7 +58,7 @@ MODELS = [
     pytest.param(jc.FiveElementModel(), marks=pytest.mark.slow),
     pytest.param(jc.BurgersModel(), marks=pytest.mark.slow),
     pytest.param(
-        TerminationCompliance(jc.IntegratedModel(), 2e-5), marks=pytest.mark.slow
+        jc.TerminationCompliance(jc.IntegratedModel(), 2e-5), marks=pytest.mark.slow
     ),
 ]
 

@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 import jaxcable as jc
-from jaxcable._cli.main import main
-from jaxcable._diagnose import heldout_rmse, noise_level, residual_structure
+from jaxcable._diagnose import heldout_rmse, noise_level
 from jaxcable._papers import synthetic as _synthetic
+from jaxcable.cli import main
 
 
 @pytest.fixture(scope="module")
@@ -81,13 +81,13 @@ def test_residual_structure_finds_the_driving_condition(clean_tests):
     residual = [
         2e-6 * t.force + 1e-6 * rng.standard_normal(t.force.size) for t in clean_tests
     ]
-    s = residual_structure(clean_tests, residual)
+    s = jc.residual_structure(clean_tests, residual)
     assert s["strongest"] == "force"
     assert s["correlation"]["force"] > 0.9
     assert s["autocorrelation"] > s["white_noise_band"]
     # White noise alone: no condition explains it, no autocorrelation.
     noise = [1e-6 * rng.standard_normal(t.force.size) for t in clean_tests]
-    s = residual_structure(clean_tests, noise)
+    s = jc.residual_structure(clean_tests, noise)
     assert max(abs(v) for v in s["correlation"].values() if v is not None) < 0.15
     assert abs(s["autocorrelation"]) < 3 * s["white_noise_band"]
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import jaxcable as jc
-from jaxcable._papers import synthesize_history
+from jaxcable.papers import synthesize_history
 
 
 TRUTH = jc.BurgersModel(E1=2.0e9, eta0=3.0e11, E2=4.0e8, eta2=2.0e10)
@@ -249,7 +249,7 @@ def test_cli_fit_and_simulate_with_the_elongation_drive(
 ):
     """`jaxcable fit` reads each file's drive and fits it; `jaxcable simulate --params
     --drive elongation` fills in force_N, whose residual is the fit's."""
-    from jaxcable._cli.main import main
+    from jaxcable.cli import main
 
     files = []
     for i, (data, _) in enumerate(displacement_tests):

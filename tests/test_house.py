@@ -30,7 +30,7 @@ LAYERS = [
     {"_fit"},
     {"_diagnose", "_montecarlo", "_papers"},
     {"_report"},
-    {"_cli", "cdpr", "papers", "states", "__init__", "__main__"},
+    {"_cli", "cdpr", "cli", "papers", "states", "__init__", "__main__"},
 ]
 LAYER = {name: i for i, names in enumerate(LAYERS) for name in names}
 

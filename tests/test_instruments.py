@@ -10,7 +10,6 @@ import pytest
 
 import jaxcable as jc
 from jaxcable._cli.data import read_tests
-from jaxcable._io import MetadataConflictWarning
 
 
 # time s, elongation mm, force N: the rows every layout below writes, in its units.
@@ -208,7 +207,7 @@ def test_unknown_layout_one_located_line(tmp_path):
 
 def test_caller_values_win_with_a_warning(tmp_path):
     path = _write(tmp_path, "bluehill.csv", _bluehill())
-    with pytest.warns(MetadataConflictWarning) as caught:
+    with pytest.warns(jc.MetadataConflictWarning) as caught:
         data = jc.read_test(path, length_mm=20, rate_mm_per_min=5.0)
     assert data.metadata["length_mm"] == 20.0
     assert len(caught) == 1  # the rate agrees
@@ -225,7 +224,7 @@ def test_caller_values_win_with_a_warning(tmp_path):
     # The canonical `# key: value` block too.
     text = "# length_mm: 300\n# material: SK78\ntime_s,force_N\n0,0\n1,1\n"
     path = _write(tmp_path, "canonical.csv", text)
-    with pytest.warns(MetadataConflictWarning, match="line 2: material='SK99'"):
+    with pytest.warns(jc.MetadataConflictWarning, match="line 2: material='SK99'"):
         data = jc.read_test(path, material="SK99")
     assert data.metadata["material"] == "SK99"
 

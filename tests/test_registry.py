@@ -14,7 +14,6 @@ import numpy as np
 import pytest
 
 import jaxcable as jc
-from jaxcable._cli.main import main
 from jaxcable._fit.serialize import model_document
 from jaxcable._models import (
     BY_CLI_NAME,
@@ -30,6 +29,7 @@ from jaxcable._models import (
     parameter_table,
 )
 from jaxcable._models.fields import field_facts, fit_parameters
+from jaxcable.cli import main
 
 
 # A few dozen samples of one load-unload history on a 7 m cable (inside the range of

@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 import jaxcable as jc
-from jaxcable._cli.main import main
-from jaxcable._papers.synthetic import synthesize
+from jaxcable.cli import main
+from jaxcable.papers import synthesize
 
 
 ELONGATION_NOISE = 1e-5  # m
