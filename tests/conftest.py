@@ -32,14 +32,13 @@ TEST_CACHE = (
 # XLA's CPU backend compiles each fusion through its MLIR fusion emitters by default.
 # The suite compiles about 1300 programs and runs most of them a few times on small
 # problems, so compilation is a large part of its cost (about 37 % of the cores' time
-# with the default emitters, issue 14); XLA's older LLVM IR emitters compile
-# the same programs about 40 % faster (issue 14: the whole suite 595 -> 427 s on two
-# cores, every test passing either way). They run large batches slower (a 1024-cable
-# forward 3x), which is why the library leaves XLA's defaults alone and only the
-# suite, its notebooks' kernels and its subprocesses switch. The first process of the
-# run checks that this jaxlib knows the flag (XLA aborts on an unknown one) and the
-# workers inherit its choice. JAXCABLE_TEST_XLA_EMITTERS=default keeps XLA's default
-# emitters (`make test-xla-default`).
+# with the default emitters); XLA's older LLVM IR emitters compile the same programs
+# about 40 % faster, every test passing either way. They run large batches slower (a
+# 1024-cable forward 3x), which is why the library leaves XLA's defaults alone and
+# only the suite, its notebooks' kernels and its subprocesses switch. The first
+# process of the run checks that this jaxlib knows the flag (XLA aborts on an unknown
+# one) and the workers inherit its choice. JAXCABLE_TEST_XLA_EMITTERS=default keeps
+# XLA's default emitters (`make test-xla-default`).
 TEST_EMITTERS_ENV = "JAXCABLE_TEST_XLA_EMITTERS"
 LEGACY_EMITTERS = "--xla_cpu_use_fusion_emitters=false"
 
@@ -120,20 +119,29 @@ def shared_data():
 # left with a long one at the end while the other idles. A group is a file (its
 # module-scoped fixtures and compiled kernels stay in one process), except for the
 # tests of OWN_GROUP, each its own group: every notebook (each runs in its own kernel
-# anyway) and the calibration (in its own interpreter, tests/test_papers.py), so that
-# they start early without the rest of their file. Seconds on a 2-core machine, from
-# `--durations` in a whole run under load (two workers, load average 5-8, issue 14);
-# update the list when a file grows slow.
+# anyway), the calibration (in its own interpreter, tests/test_papers.py) and the
+# demo, so that they start early without the rest of their file. Seconds on a 2-core
+# machine, from `--durations` in a whole run under load (two workers, load average
+# 5-8); update the list when a file grows slow.
+#
+# A worker is handed its next group while it still has up to two tests to run, so
+# the first worker runs the demo and then the diagnosis notebook, while the second
+# runs the calibration: the demo fits and diagnoses the bundled data set as
+# 02_fit.ipynb and 03_diagnose.ipynb do, and the notebooks then load those programs
+# from the run's compilation cache instead of compiling them again.
 NOTEBOOK_RUNS = "tests/test_notebooks.py::test_notebook_runs["
+DEMO = "tests/test_cli.py::test_demo_bundled_data"
 OWN_GROUP = (
     NOTEBOOK_RUNS,
     "tests/test_papers.py::test_calibrate_runs_and_does_not_worsen",
+    DEMO,
 )
 SLOW_FIRST = (
-    "tests/test_notebooks.py::test_notebook_runs[03_diagnose.ipynb]",  # 247 s
+    DEMO,  # 18 s
+    "tests/test_papers.py::test_calibrate_runs_and_does_not_worsen",  # 49 s
+    "tests/test_notebooks.py::test_notebook_runs[03_diagnose.ipynb]",  # 87 s
     "tests/test_cli.py",  # 262 s
     "tests/test_diagnose.py",  # 190 s
-    "tests/test_papers.py::test_calibrate_runs_and_does_not_worsen",  # 121 s
     "tests/test_jax_contract.py",  # 200 s before its gradient tests were jitted
     "tests/test_diagnose_drive.py",  # about 100 s
     "tests/test_drive.py",  # about 60 s

@@ -867,7 +867,7 @@ def test_every_model_simulates_a_protocol(tmp_path, name):
 def test_console_entry_freezes_the_imports_and_exits_with_mains_status(monkeypatch):
     # `jaxcable` and `python -m jaxcable` run `entry`: it freezes the objects of the
     # imports (the collector then skips them), then exits with main's status.
-    cli_main = importlib.import_module("jaxcable.cli")
+    cli_main = importlib.import_module("jaxcable._cli.main")
     calls = []
     monkeypatch.setattr(cli_main.gc, "freeze", lambda: calls.append("freeze"))
     monkeypatch.setattr(cli_main, "main", lambda: calls.append("main") or 2)

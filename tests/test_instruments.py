@@ -234,7 +234,7 @@ def test_cli_prints_the_warning_as_one_line(tmp_path, capsys):
     options = dict(length_mm=20.0, detect_slack=False)
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # printed, not raised
-        (data,) = read_tests([path], options, 1, False)
+        (data,) = read_tests([path], options, 1, jc.NoProgressMeter())
     assert data.metadata["length_mm"] == 20.0
     err = capsys.readouterr().err
     assert err.count("\n") == 1

@@ -2,6 +2,7 @@
 fitted to them by `jaxcable.papers.calibrate_sk78`, see notebooks/01_papers.ipynb)."""
 
 import json
+import os
 import subprocess
 import sys
 
@@ -96,9 +97,10 @@ def test_rest_dependence_of_the_second_test(report):
 
 def test_rests_end_no_shorter_than_new():
     # After 10 cycles to 100 N at 3 mm/min, the 100 and 300 mm cables end the 24,
-    # 48 and 72 h rests longer than new.
+    # 48 and 72 h rests longer than new. At the report's 200 samples per ramp: the
+    # simulations the `report` fixture compiled.
     _, ok, rest_ends, _ = park.simulate_targets(
-        jc.IntegratedModel(), 100, None, throw=False
+        jc.IntegratedModel(), 200, None, throw=False
     )
     assert bool(np.all(ok))
     assert np.all(np.asarray(rest_ends) > 0), rest_ends
@@ -136,8 +138,12 @@ def test_rate_effect():
 
 def test_failed_simulation_reported_as_nan():
     # t_r2 < 0 at 50 mm/min (Park Eq. 8): only that target is lost.
-    model = eqx.tree_at(lambda m: m.lambda2, jc.IntegratedModel(), 1e3)
-    rows = {r.name: r for r in papers.sk78_targets_report(model, samples_per_ramp=20)}
+    # The report's default sampling and lambda2 an array of the fields' dtype (not a
+    # weak one): the program the `report` fixture compiled.
+    model = eqx.tree_at(
+        lambda m: m.lambda2, jc.IntegratedModel(), jnp.asarray(1e3, jnp.float64)
+    )
+    rows = {r.name: r for r in papers.sk78_targets_report(model)}
     assert np.isnan(rows["peak_300mm_50mm_min"].model)
     assert all(
         np.isfinite(r.model)
@@ -193,13 +199,19 @@ print(json.dumps(dict(
 
 
 @pytest.mark.slow
-def test_calibrate_runs_and_does_not_worsen():
+def test_calibrate_runs_and_does_not_worsen(jax_cache_env):
     # In a fresh interpreter: compiled late in the full suite, in a process that has
     # compiled hundreds of kernels before, XLA's CPU compiler crashed (SIGSEGV) on this
     # large forward-mode program, twice in a row on a fresh clone, while the same test
-    # alone passes; isolated, the crash cannot take the suite down with it.
+    # alone passes; isolated, the crash cannot take the suite down with it. With the
+    # run's compilation cache (tests/conftest.py): the report the calibration ends with
+    # is the program of this module's `report` fixture, which then loads it.
     out = subprocess.run(
-        [sys.executable, "-c", _CALIBRATE], capture_output=True, text=True, timeout=900
+        [sys.executable, "-c", _CALIBRATE],
+        capture_output=True,
+        text=True,
+        timeout=900,
+        env={**os.environ, **jax_cache_env},
     )
     assert out.returncode == 0, out.stderr[-2000:]
     cal = json.loads(out.stdout.strip().splitlines()[-1])
