@@ -2,4 +2,4 @@
 commands in-process: `jaxcable.cli.main(["fit", "data.csv", "--out", "p.json"])`
 returns the exit status the console script would."""
 
-from ._cli.main import main as main
+from ._cli import main as main

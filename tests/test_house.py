@@ -23,6 +23,7 @@ LAYERS = [
         "_cache",
         "_cpu_loops",
         "_files",
+        "_json",
     },
     {"_models"},
     {"_drive"},

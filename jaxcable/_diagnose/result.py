@@ -7,11 +7,10 @@ import json
 import math
 from typing import Any
 
-import numpy as np
-
 from .._drive import AbstractTestDrive, as_test_drive
 from .._files import write_text_atomic
 from .._fit import FitResult
+from .._json import jsonable
 from .verdict import (
     MAX_FLOOR_RATIO,
     MIN_AUTOCORRELATION,
@@ -118,7 +117,7 @@ class Candidate:
         out.pop("fit")
         out["heldout_rmse_mm"] = self.heldout_rmse_mm
         out["train_rmse_mm"] = self.train_rmse_mm
-        return {k: _jsonable(v) for k, v in out.items()}
+        return {k: jsonable(v) for k, v in out.items()}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -217,17 +216,17 @@ class Diagnosis:
             "named_cause": self.named_cause,
             "verdict": self.verdict,
             "base_model": self.base_model,
-            "base_heldout_rmse_mm": _jsonable(self.base_heldout_rmse_mm),
-            "base_train_rmse_mm": _jsonable(self.base_train_rmse_mm),
-            "extended_heldout_rmse_mm": _jsonable(self.extended_heldout_rmse_mm),
-            "gain_pct": _jsonable(self.gain_pct),
-            "effect": {k: _jsonable(v) for k, v in self.effect.items()},
-            "noise_mm": _jsonable(self.noise_mm),
+            "base_heldout_rmse_mm": jsonable(self.base_heldout_rmse_mm),
+            "base_train_rmse_mm": jsonable(self.base_train_rmse_mm),
+            "extended_heldout_rmse_mm": jsonable(self.extended_heldout_rmse_mm),
+            "gain_pct": jsonable(self.gain_pct),
+            "effect": {k: jsonable(v) for k, v in self.effect.items()},
+            "noise_mm": jsonable(self.noise_mm),
             "unit": self.unit,
-            "base_heldout_rmse": _jsonable(self.base_heldout_rmse),
-            "base_train_rmse": _jsonable(self.base_train_rmse),
-            "extended_heldout_rmse": _jsonable(self.extended_heldout_rmse),
-            "noise": _jsonable(self.noise),
+            "base_heldout_rmse": jsonable(self.base_heldout_rmse),
+            "base_train_rmse": jsonable(self.base_train_rmse),
+            "extended_heldout_rmse": jsonable(self.extended_heldout_rmse),
+            "noise": jsonable(self.noise),
             "drives": [as_test_drive(d).name for d in self.drives],
             "split": self.split,
             "thresholds": {
@@ -240,8 +239,8 @@ class Diagnosis:
                 "min_autocorrelation_unexplained": MIN_AUTOCORRELATION,
             },
             "candidates": [c.to_dict() for c in self.candidates],
-            "discovered": _jsonable(self.discovered),
-            "structure": _jsonable(self.structure),
+            "discovered": jsonable(self.discovered),
+            "structure": jsonable(self.structure),
             "tests": list(self.test_ids),
         }
 
@@ -382,19 +381,3 @@ def _scored_line(drives: tuple, unit: str) -> str:
         f"{len(drives) - by_force} elongation-driven by their force; residuals in "
         "noise units (each divided by the noise of its test's scored channel)"
     )
-
-
-def _jsonable(x):
-    """`x` with NumPy scalars as Python numbers and non-finite floats as None (JSON
-    has no NaN), through dicts, lists and tuples."""
-    if isinstance(x, dict):
-        return {k: _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, (bool, np.bool_)):
-        return bool(x)
-    if isinstance(x, (int, np.integer)):
-        return int(x)
-    if isinstance(x, (float, np.floating)):
-        return float(x) if math.isfinite(x) else None
-    return x

@@ -3,7 +3,6 @@
 import dataclasses
 import importlib.metadata
 import json
-import math
 import os
 from collections.abc import Mapping
 from typing import Any
@@ -13,20 +12,11 @@ import numpy as np
 from .._drive import FORCE_DRIVEN, AbstractTestDrive, as_test_drive
 from .._files import write_text_atomic
 from .._io import parse_json, read_json
+from .._json import from_json_number, jsonable
 from .._models import AbstractCableModel
 from .._results import RESULTS
 from .parameters import test_slice
 from .serialize import model_document, model_from_document, unknown_model
-
-
-def _json_number(x: float) -> float | None:
-    """`x` for JSON: null where not finite."""
-    return float(x) if math.isfinite(x) else None
-
-
-def _from_json_number(x) -> float:
-    """The inverse of `_json_number`: NaN for null."""
-    return math.nan if x is None else float(x)
 
 
 def _result_name(result: RESULTS) -> str:
@@ -57,7 +47,7 @@ def _read_result(doc: Mapping[str, Any]) -> RESULTS:
 
 
 def _json_matrix(matrix: np.ndarray) -> list[list[float | None]]:
-    return [[_json_number(float(c)) for c in row] for row in matrix]
+    return [[jsonable(float(c)) for c in row] for row in matrix]
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -253,24 +243,24 @@ class FitResult:
                 {
                     "name": n,
                     "value": float(v),
-                    "stderr": _json_number(float(s)),
+                    "stderr": jsonable(float(s)),
                     "unit": u,
                 }
                 for n, v, s, u in fitted
             ],
             "correlation": _json_matrix(self.correlation),
             "covariance": _json_matrix(self.covariance),
-            "singular_values": [_json_number(float(s)) for s in self.singular_values],
+            "singular_values": [jsonable(float(s)) for s in self.singular_values],
             "tests": [
                 {
                     "id": tid,
                     "samples": int(k),
                     "drive": self.drive(i).name,
-                    "rmse_mm": _json_number(float(mm)),
-                    "rmse_N": _json_number(self.rmse(i)[0])
+                    "rmse_mm": jsonable(float(mm)),
+                    "rmse_N": jsonable(self.rmse(i)[0])
                     if self.drive(i).scores_force
                     else None,
-                    "rmse_percent": _json_number(float(pct)),
+                    "rmse_percent": jsonable(float(pct)),
                 }
                 for i, (tid, k, mm, pct) in enumerate(self._per_test_rows())
             ],
@@ -280,7 +270,7 @@ class FitResult:
             "converged": bool(self.converged),
             "message": self.message,
             "num_steps": int(self.num_steps),
-            "start_losses": [_json_number(float(x)) for x in self.start_losses],
+            "start_losses": [jsonable(float(x)) for x in self.start_losses],
             "warnings": list(self.warnings),
         }
         text = json.dumps(document, indent=2)
@@ -341,7 +331,7 @@ class FitResult:
 
         def matrix(key):
             return np.array(
-                [[_from_json_number(c) for c in row] for row in doc[key]],
+                [[from_json_number(c) for c in row] for row in doc[key]],
                 dtype=float,
             ).reshape(len(fitted), len(fitted))
 
@@ -351,18 +341,16 @@ class FitResult:
             names=tuple(p["name"] for p in fitted),
             units=tuple(p.get("unit", "") for p in fitted),
             values=np.array([p["value"] for p in fitted], float),
-            stderr=np.array([_from_json_number(p["stderr"]) for p in fitted]),
+            stderr=np.array([from_json_number(p["stderr"]) for p in fitted]),
             covariance=matrix("covariance"),
             correlation=matrix("correlation"),
             singular_values=np.array(
-                [_from_json_number(s) for s in doc.get("singular_values", [])]
+                [from_json_number(s) for s in doc.get("singular_values", [])]
             ),
             loss=float(doc["loss_m2"]),
-            rmse_mm=np.array([_from_json_number(t["rmse_mm"]) for t in tests]),
-            rmse_percent=np.array(
-                [_from_json_number(t["rmse_percent"]) for t in tests]
-            ),
-            rmse_N=np.array([_from_json_number(t.get("rmse_N")) for t in tests]),
+            rmse_mm=np.array([from_json_number(t["rmse_mm"]) for t in tests]),
+            rmse_percent=np.array([from_json_number(t["rmse_percent"]) for t in tests]),
+            rmse_N=np.array([from_json_number(t.get("rmse_N")) for t in tests]),
             drives=tuple(as_test_drive(t.get("drive", "force")) for t in tests),
             loss_unit=doc.get("loss_unit", "m^2"),
             test_ids=tuple(t["id"] for t in tests),
@@ -371,7 +359,7 @@ class FitResult:
             result=_read_result(doc),
             num_steps=int(doc["num_steps"]),
             start_losses=np.array(
-                [_from_json_number(x) for x in doc.get("start_losses", [])]
+                [from_json_number(x) for x in doc.get("start_losses", [])]
             ),
             per_test=tuple(doc.get("per_test", [])),
         )
