@@ -197,7 +197,11 @@ def main(argv=None):
         chunk_size=args.chunk_size,
         method=args.method,
         bins=args.bins,
-        progress=args.progress and index == 0,
+        progress_meter=(
+            jc.TextProgressMeter()
+            if args.progress and index == 0
+            else jc.NoProgressMeter()
+        ),
     )
     first = None
     if args.warmup:
