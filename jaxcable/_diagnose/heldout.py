@@ -22,14 +22,6 @@ def heldout_start(n: int, holdout: float) -> int:
     return int(round(n * (1.0 - holdout)))
 
 
-def heldout_masks(tests, holdout: float) -> list[np.ndarray]:
-    """One boolean array per test, True on the last `holdout` fraction of its
-    samples (the held-out samples of the time split)."""
-    return [
-        np.arange(len(t.time)) >= heldout_start(len(t.time), holdout) for t in tests
-    ]
-
-
 def time_split(tests, holdout: float) -> tuple[list, list]:
     """(training tests, held-out tests): the same tests with complementary masks, the
     last `holdout` fraction of each test's samples held out. The whole history still
