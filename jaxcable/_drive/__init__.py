@@ -27,10 +27,11 @@ from .drives import (
     ElongationSample as ElongationSample,
     default_solver as default_solver,
 )
-from .newton import Newton as Newton
+from .newton import ROBUST as ROBUST, Newton as Newton
 from .protocol import (
     Protocol as Protocol,
 )
+from .scan import Solve as Solve
 from .simulate import (
     check_history as check_history,
     simulate_elongation_history as simulate_elongation_history,

@@ -17,9 +17,9 @@ from jaxtyping import Array, Bool, Float, Int
 from .._cable import Cable
 from .._models import AbstractCableModel, StrainParts
 from .._results import RESULTS
-from .newton import Newton, root_scalar
+from .newton import FAST, REPLAY, Newton, branches_are_cheap, root_scalar
 from .protocol import Protocol
-from .scan import SOLUTION, AbstractDrive, AbstractSample
+from .scan import SOLUTION, AbstractDrive, AbstractSample, Solve
 from .state import (
     CableState,
     commit,
@@ -102,8 +102,9 @@ class ForceDrive(AbstractDrive):
     def init(self, model, cable):
         return init_state(model, cable, self.samples.time[0]), self.samples
 
-    def step(self, model, cable, state, sample):
-        return force_step(model, cable, state, sample)
+    def step(self, model, cable, state, sample, solve):
+        new, parts = force_step(model, cable, state, sample)
+        return new, parts, jnp.zeros_like(new.force)
 
 
 # ----------------------------------------------------------------------------------
@@ -187,7 +188,7 @@ class RateDrive(AbstractDrive):
         )
         return state, samples
 
-    def step(self, model, cable, state, sample: RateSample):
+    def step(self, model, cable, state, sample: RateSample, solve: Solve):
         force, branch, duration = sample.force, sample.direction, sample.duration
 
         # Initial guess. Inside a ramp, the previous step's duration (samples are
@@ -202,7 +203,12 @@ class RateDrive(AbstractDrive):
             jump = jnp.abs(parts0.total - state.strain) / cable.strain_rate
             return jnp.where(branch != 0, jump, duration)
 
-        guess = jax.lax.cond(sample.continues, lambda: state.last_step, first_guess)
+        if solve.how == REPLAY:
+            guess = solve.root
+        elif solve.how == FAST and not branches_are_cheap():
+            guess = jnp.where(sample.continues, state.last_step, first_guess())
+        else:
+            guess = jax.lax.cond(sample.continues, lambda: state.last_step, first_guess)
         limit = strain_limit(model)
         # Along a loading ramp the crosshead overtakes the model strain (slope < 0 at
         # the root); along an unloading ramp the other way round; a hold is linear in
@@ -241,6 +247,8 @@ class RateDrive(AbstractDrive):
                 jnp.inf,
             ),
             has_aux=True,
+            how=solve.how,
+            known=solve.root,
         )
         dt = checkpoint_name(root.value, SOLUTION)
         model_state, parts = root.aux
@@ -252,7 +260,7 @@ class RateDrive(AbstractDrive):
             dt=dt,
         )
         result = solved_result(result, parts.total, limit)
-        return commit(
+        new, parts = commit(
             state,
             cable,
             model_state,
@@ -262,6 +270,7 @@ class RateDrive(AbstractDrive):
             result,
             sample.mask,
         )
+        return new, parts, dt
 
 
 # ----------------------------------------------------------------------------------
@@ -293,6 +302,23 @@ def _force_residual(force, problem: _ForceProblem):
     return (parts.total - problem.target) / scale, (model_state, parts)
 
 
+def _force_guess(state: CableState, cable: Cable, problem: _ForceProblem):
+    """The initial guess of an elongation sample's force, N: from the local
+    compliance at the previous force (Newton's first step taken by hand with a
+    floor, since the hardening law has zero slope at 0 N)."""
+    f_prev = jnp.maximum(state.force, 1e-3 * cable.breaking_load)
+    r_prev, compliance = jax.jvp(
+        lambda f: _force_residual(f, problem)[0],
+        (f_prev,),
+        (jnp.ones_like(f_prev),),
+    )
+    return jnp.clip(
+        f_prev - r_prev / compliance,
+        1e-6 * cable.breaking_load,
+        cable.breaking_load,
+    )
+
+
 class ElongationDrive(AbstractDrive):
     """A time-stamped elongation history, from the unloaded cable at its first time.
 
@@ -305,7 +331,7 @@ class ElongationDrive(AbstractDrive):
     def init(self, model, cable):
         return init_state(model, cable, self.samples.time[0]), self.samples
 
-    def step(self, model, cable, state, sample: ElongationSample):
+    def step(self, model, cable, state, sample: ElongationSample, solve: Solve):
         target = sample.elongation / cable.length
         dt = sample.time - state.time
         branch = direction(target - state.strain)
@@ -318,20 +344,10 @@ class ElongationDrive(AbstractDrive):
         zero = jnp.zeros_like(target)
         r_zero, at_zero = _force_residual(zero, problem)
         slack = r_zero >= 0
-        # Initial guess from the local compliance at the previous force (Newton's
-        # first step taken by hand with a floor, since the hardening law has zero
-        # slope at 0 N).
-        f_prev = jnp.maximum(state.force, 1e-3 * cable.breaking_load)
-        r_prev, compliance = jax.jvp(
-            lambda f: _force_residual(f, problem)[0],
-            (f_prev,),
-            (jnp.ones_like(f_prev),),
-        )
-        guess = jnp.clip(
-            f_prev - r_prev / compliance,
-            1e-6 * cable.breaking_load,
-            cable.breaking_load,
-        )
+        if solve.how == REPLAY:
+            guess = solve.root
+        else:
+            guess = _force_guess(state, cable, problem)
         # Strain rises with force; a flat slope (0 N under hardening) grows the force.
         root = root_scalar(
             _force_residual,
@@ -344,6 +360,8 @@ class ElongationDrive(AbstractDrive):
             active=_active(state, sample),
             name=SOLUTION,
             has_aux=True,
+            how=solve.how,
+            known=solve.root,
         )
         unloaded = slack & ~root.converged
         force = checkpoint_name(jnp.where(unloaded, zero, root.value), SOLUTION)
@@ -353,6 +371,7 @@ class ElongationDrive(AbstractDrive):
             converged=unloaded | (root.converged & _verified(miss)), force=force
         )
         result = solved_result(result, parts.total, strain_limit(model))
-        return commit(
+        new, parts = commit(
             state, cable, model_state, parts, sample.time, force, result, sample.mask
         )
+        return new, parts, force

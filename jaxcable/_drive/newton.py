@@ -12,6 +12,7 @@ import optimistix as optx
 from jax.ad_checkpoint import checkpoint_name
 from jaxtyping import Array, Bool, Float, Int
 
+from .bracket import Bracket
 from .root_derivatives import (
     aux_at_root,
     evaluate_where,
@@ -26,15 +27,26 @@ class Newton(eqx.Module):
 
     The per-sample problems of jaxcable (the loading time of a force sample, Park
     Eq. 6; the force of an imposed elongation) are scalar and smooth, and a good
-    initial guess is known (along a ramp, the previous sample's duration), so Newton
-    converges in one or two steps. This solver takes `unrolled` steps without a loop,
-    then continues in a `lax.while_loop` only while some sample is unconverged, up to
-    `max_steps`. One unrolled step is the fastest on a CPU (measured in
-    `benchmarks/kernel.py`): each unrolled step is a copy of the model's code in the
-    scan body, and a larger body costs more per sample than the loop's predicate,
-    also under `vmap`, where the loop runs until every lane has converged.
-    Derivatives are taken by the implicit function theorem with the slope of the
-    last Newton step (`root_derivatives.implicit_root`), never through the iterations.
+    initial guess is known (along a ramp, the previous sample's duration), so
+    Newton's method converges in two or three steps. A sample first takes
+    `unrolled` Newton steps, with no loop and no branch (one kernel per step,
+    vectorised across a batch); a step converges where its residual is within
+    `tol`, or where the residual after it is predicted so from two contracting
+    steps (`_converged`). Only where that did not happen does the robust path take
+    over: Newton's method in a `lax.while_loop` up to `max_steps`, then a bracket
+    search and bisection (`root_scalar`). Derivatives are taken by the implicit
+    function theorem at each sample's root (`root_derivatives.implicit_root`),
+    never through the iterations.
+
+    Where the robust path's loops are entered is `two_pass`'s choice. In one pass
+    (a CPU's default), they follow each sample's unrolled steps, entered only by
+    the lanes that need them: a batch that converged passes each loop with one
+    predicate. On an accelerator every loop or branch reads its predicate back to
+    the host, a round trip per sample; in two passes (an accelerator's default) the
+    first has no loop at all, a history in which some sample did not converge is
+    solved again by the robust path (one loop for the whole history, entered only
+    by the cables that need it), and a differentiated simulation replays the
+    history at its roots for the derivatives (`scan.run`).
 
     Any optimistix root finder (e.g. `optx.Newton(rtol, atol)`) can be passed
     instead, where a simulation takes `solver=`; it runs through `optx.root_find`
@@ -48,13 +60,67 @@ class Newton(eqx.Module):
         strain errors (dimensionless), so `tol` is a relative accuracy of the strain;
         a few float32 epsilons at most in single precision.
     - `max_steps`: the most Newton steps in all; beyond it the sample is flagged
-        `RESULTS.newton_failed`.
-    - `unrolled`: Newton steps taken before the convergence loop.
+        `RESULTS.newton_failed` (or solved by the bracket fallback).
+    - `unrolled`: the Newton steps every sample takes before any loop (>= 1).
+    - `two_pass`: solve a history in two passes (True) or one (False); None (the
+        default): two on an accelerator, one on a CPU (`branches_are_cheap`). The
+        results agree to the tolerance either way.
     """
 
     tol: float
     max_steps: int = 32
-    unrolled: int = 1
+    unrolled: int = 3
+    two_pass: bool | None = None
+
+    def __check_init__(self):
+        for name, least in (("max_steps", 1), ("unrolled", 1)):
+            value = getattr(self, name)
+            if not isinstance(value, int) or isinstance(value, bool) or value < least:
+                raise ValueError(
+                    f"Newton: `{name}` must be an int >= {least}, got {value!r}."
+                )
+        if self.two_pass not in (None, True, False):
+            raise ValueError(
+                f"Newton: `two_pass` must be None, True or False, got {self.two_pass!r}."
+            )
+
+    @property
+    def in_two_passes(self) -> bool:
+        """Whether a history is solved in two passes here (see `two_pass`)."""
+        if self.two_pass is None:
+            return not branches_are_cheap()
+        return self.two_pass
+
+
+def branches_are_cheap() -> bool:
+    """Whether a `lax.cond` or `lax.while_loop` inside a scan is cheap where the
+    program runs: on a CPU its predicate is already on the host; on an accelerator
+    every one reads its predicate back to the host, a round trip per sample. The
+    default backend at trace time decides (the same choice for every sample: the
+    results do not depend on it)."""
+    return jax.default_backend() == "cpu"
+
+
+def _converged(previous, residual, plain, tol):
+    """Whether a Newton iterate with `residual` is converged: within `tol`, or
+    predicted within it after the refinement step that follows (a `plain` Newton
+    step). Newton's error squares each step, r_next ~ C r^2 with C ~ r / previous^2
+    from the residual before (`previous`); the prediction is trusted only where the
+    two steps contract (|r| below a tenth of |previous|), and asked to be a tenth
+    of `tol`. The refined root is then accurate to the tolerance, and fn's output
+    there follows to the same order (`root_derivatives.aux_at_root`): a sample
+    converges in one evaluation fewer."""
+    last = jnp.abs(residual)
+    ratio = last / jnp.abs(previous)
+    contracts = (ratio <= 0.1) & jnp.isfinite(previous) & (previous != 0)
+    predicted = last * ratio * ratio
+    return (last <= tol) | (plain & contracts & (predicted <= 0.1 * tol))
+
+
+# How `root_scalar` solves: the robust path (loops, bracket, bisection); the fixed
+# steps of a first pass; or the replay of a root already known (its derivatives and
+# fn's output there).
+ROBUST, FAST, REPLAY = "robust", "fast", "replay"
 
 
 def _past_turning_point(fn, y, args, slope_sign, growth, max_steps: int = 32):
@@ -100,55 +166,6 @@ class RootResult(eqx.Module):
     aux: Any = None
 
 
-class _Bracket(eqx.Module):
-    """A bracket of the wanted root, from the points a solve has evaluated.
-
-    With s = `slope_sign`, the wanted root has fn * s < 0 to its left (not yet
-    reached) and fn * s > 0 to its right (past it). `left` is the largest y seen on
-    the left side, `right` the smallest y seen past the root and above `left`; while
-    `left < right` the interval holds a crossing of fn in the wanted direction
-    (fn continuous). A crossing in the other direction (a root where fn has the other
-    slope, e.g. where creep overtakes the crosshead after the force was passed) is
-    never bracketed. Without `slope_sign`, any sign change is a bracket.
-    """
-
-    left: Float[Array, ""]
-    right: Float[Array, ""]
-    has_left: Bool[Array, ""]
-    has_right: Bool[Array, ""]
-    slope_sign: Float[Array, ""] | None
-
-    @staticmethod
-    def empty(y, slope_sign):
-        no = jnp.zeros_like(y, dtype=bool)
-        return _Bracket(y, y, no, no, slope_sign)
-
-    def see(self, y, r):
-        if self.slope_sign is None:
-            is_left, is_right = r < 0, r > 0
-            left = jnp.where(is_left, y, self.left)
-            right = jnp.where(is_right, y, self.right)
-            return _Bracket(
-                left, right, self.has_left | is_left, self.has_right | is_right, None
-            )
-        q = r * self.slope_sign
-        is_left = (q < 0) & (~self.has_left | (y > self.left))
-        left = jnp.where(is_left, y, self.left)
-        has_left = self.has_left | is_left
-        # A `right` at or below the new `left` no longer brackets anything.
-        has_right = self.has_right & (~has_left | (self.right > left))
-        is_right = (q > 0) & (~has_left | (y > left)) & (~has_right | (y < self.right))
-        right = jnp.where(is_right, y, self.right)
-        return _Bracket(left, right, has_left, has_right | is_right, self.slope_sign)
-
-    @property
-    def found(self):
-        return self.has_left & self.has_right
-
-    def midpoint(self):
-        return 0.5 * (self.left + self.right)
-
-
 # The phases of a lane in `root_scalar`'s loop: Newton's method, then, only where it
 # failed, the bracket search (`_SEARCH`) and bisection, then done.
 _NEWTON, _SEARCH, _BISECT, _DONE = 0, 1, 2, 3
@@ -158,8 +175,8 @@ class _SolveState(eqx.Module):
     """The carry of `root_scalar`'s loop, one lane.
 
     Newton's method: the next iterate `y`, the residual and the `slope` at the
-    previous one (|residual| <= tol: converged), whether the iterate is `stuck` at
-    `lower`, and the Newton `steps` taken. The fallback: the step `k` of the bracket
+    previous one, whether that iterate `converged` (`_converged`), whether the
+    iterate is `stuck` at `lower`, and the Newton `steps` taken. The fallback: the step `k` of the bracket
     search or of the bisection, and the last point that it evaluated (`y_end`, with
     residual `r_end`). Both: the `bracket` of all points evaluated and the lane's
     `phase`.
@@ -168,7 +185,8 @@ class _SolveState(eqx.Module):
     y: Float[Array, ""]
     residual: Float[Array, ""]
     slope: Float[Array, ""]
-    bracket: _Bracket
+    bracket: Bracket
+    converged: Bool[Array, ""]
     stuck: Bool[Array, ""]
     steps: Int[Array, ""] | int
     phase: Int[Array, ""]
@@ -189,6 +207,8 @@ def root_scalar(
     upper: Float[Array, ""] | None = None,
     name: str | None = None,
     has_aux: bool = False,
+    how: str = ROBUST,
+    known: Float[Array, ""] | None = None,
 ) -> RootResult:
     """Solve fn(y, args) = 0 for a scalar lower <= y <= upper.
 
@@ -201,7 +221,7 @@ def root_scalar(
     solver gets the same treatment of its initial guess only: it starts from the
     first y (of guess, 2 guess + growth, ...) where the slope has `slope_sign`.
 
-    Every residual evaluated updates a bracket of the wanted root (`_Bracket`: a
+    Every residual evaluated updates a bracket of the wanted root (`Bracket`: a
     crossing in the direction of `slope_sign`). Where Newton's method has not
     converged in `max_steps`, fn is scanned for a bracket if its iterates found
     none (a scan from `lower` up to 2**60 `growth`), and the solve is finished
@@ -258,7 +278,7 @@ def root_scalar(
         converged = sol.result == optx.RESULTS.successful
         # optimistix keeps no bracket: only the two ends of the search are seen.
         y = sol.value
-        seen = _Bracket.empty(y, slope_sign)
+        seen = Bracket.empty(y, slope_sign)
         seen = seen.see(guess, fn(guess, args)).see(y, fn(y, args))
         aux = fn_aux(y, args)[1] if has_aux else None
         return RootResult(y, converged, ~converged & ~seen.found, aux)
@@ -303,11 +323,12 @@ def root_scalar(
             stuck = (y <= lower) & (y_new <= lower)
         else:
             stuck = (y <= lower) & (r * slope_sign > 0)
-        return y_new, stuck
+        # A plain Newton step: no safeguard and no bound changed it.
+        plain = ok & (y_new == y - step)
+        return y_new, stuck, plain
 
     def newton_on(s: _SolveState):
-        done = (jnp.abs(s.residual) <= tol) | s.stuck
-        return (s.steps < solver.max_steps) & live & ~done
+        return (s.steps < solver.max_steps) & live & ~(s.converged | s.stuck)
 
     def newton(s: _SolveState, f, with_aux: bool = False):
         # With `with_aux`, also fn's auxiliary output at the evaluated point and its
@@ -319,12 +340,21 @@ def root_scalar(
             )
         else:
             r, slope = jax.jvp(lambda y: f(y)[0], (s.y,), (jnp.ones_like(s.y),))
-        y, stuck = newton_step(s.y, r, slope)
+        y, stuck, plain = newton_step(s.y, r, slope)
         bracket = s.bracket.see(s.y, r)
+        converged = _converged(s.residual, r, plain, tol)
         new = eqx.tree_at(
-            lambda s: (s.y, s.residual, s.slope, s.bracket, s.stuck, s.steps),
+            lambda s: (
+                s.y,
+                s.residual,
+                s.slope,
+                s.bracket,
+                s.converged,
+                s.stuck,
+                s.steps,
+            ),
             s,
-            (y, r, slope, bracket, stuck, s.steps + 1),
+            (y, r, slope, bracket, converged, stuck, s.steps + 1),
         )
         return (new, (s.y, aux, aux_t)) if with_aux else new
 
@@ -365,6 +395,30 @@ def root_scalar(
         )
         return settle(s)
 
+    def fixed_steps(g, args, y0):
+        # `solver.unrolled` Newton steps and no loop: the first of two passes.
+        f = lambda y: g(y, args)
+        inf = jnp.full_like(y0, jnp.inf)
+        no = jnp.zeros_like(y0, dtype=bool)
+        zero = jnp.zeros_like(y0, dtype=jnp.int32)
+        bracket = Bracket.empty(y0, slope_sign)
+        state = _SolveState(y0, inf, inf, bracket, no, no, 0, zero, zero, y0, inf)
+        y_eval, aux, aux_t = y0, None, None
+        for _ in range(solver.unrolled):
+            state, (y_eval, aux, aux_t) = newton(state, f, with_aux=True)
+        ok = state.converged & jnp.isfinite(state.y)
+        return state.y, state.slope, ok, y_eval, aux, aux_t
+
+    def at_known(g, args, y0):
+        # One evaluation at the known root: its slope and fn's output there.
+        f = lambda y: g(y, args)
+        (r, aux), (slope, aux_t) = jax.jvp(f, (y0,), (jnp.ones_like(y0),))
+        aux_t = jax.tree_util.tree_map(
+            lambda a, t: t if inexact(a) else jnp.zeros_like(a), aux, aux_t
+        )
+        ok = (jnp.abs(r) <= tol) & jnp.isfinite(y0)
+        return y0, slope, ok, y0, aux, aux_t
+
     def solve(g, args, y0):
         # The first `unrolled` Newton steps, Newton's loop, then one loop for the
         # search and the bisection of the lanes that Newton's method left
@@ -376,8 +430,8 @@ def root_scalar(
         inf = jnp.full_like(y0, jnp.inf)
         no = jnp.zeros_like(y0, dtype=bool)
         zero = jnp.zeros_like(y0, dtype=jnp.int32)
-        bracket = _Bracket.empty(y0, slope_sign)
-        state = _SolveState(y0, inf, inf, bracket, no, 0, zero, zero, y0, inf)
+        bracket = Bracket.empty(y0, slope_sign)
+        state = _SolveState(y0, inf, inf, bracket, no, no, 0, zero, zero, y0, inf)
         shape = jax.eval_shape(lambda y: f(y)[1], y0)
         aux = jax.tree_util.tree_map(lambda a: jnp.zeros(a.shape, a.dtype), shape)
         y_eval, aux_t = y0, aux
@@ -389,14 +443,14 @@ def root_scalar(
         # Where the last unrolled evaluation was within the tolerance, the root is
         # that point plus one refinement step, and fn's output there follows from
         # the evaluation's (`aux_at_root`).
-        fresh = (jnp.abs(state.residual) <= tol) & (solver.unrolled > 0)
+        fresh = state.converged & (solver.unrolled > 0)
         state = jax.lax.while_loop(
             newton_on,
             lambda s: newton(s, lambda y: g(y, loop_tied(args, s.steps))),
             state,
         )
         y, bracket = state.y, state.bracket
-        ok = (jnp.abs(state.residual) <= tol) & jnp.isfinite(y)
+        ok = state.converged & jnp.isfinite(y)
         failed = live & ~ok
         state = eqx.tree_at(
             lambda s: s.phase, state, jnp.where(failed, _SEARCH, _DONE) + zero
@@ -431,12 +485,19 @@ def root_scalar(
     # root's derivatives come from the implicit function theorem (`root_derivatives.implicit_root`).
     diff, static = eqx.partition(args, eqx.is_inexact_array)
     frozen = eqx.combine(jax.lax.stop_gradient(diff), static)
-    y, slope, ok, no_root, y_eval, aux, aux_t = solve(
-        fn_aux, frozen, jax.lax.stop_gradient(guess)
-    )
+    if how == ROBUST:
+        y, slope, ok, no_root, y_eval, aux, aux_t = solve(
+            fn_aux, frozen, jax.lax.stop_gradient(guess)
+        )
+    else:
+        start = guess if how == FAST else known
+        y, slope, ok, y_eval, aux, aux_t = (fixed_steps if how == FAST else at_known)(
+            fn_aux, frozen, jax.lax.stop_gradient(start)
+        )
+        no_root = jnp.zeros_like(ok)
     if name is not None:
         y, slope = checkpoint_name((y, slope), name)
-    y = implicit_root(y, slope, args, fn=fn)
+    y = implicit_root(y, slope, args, fn=fn, slope_known=how != ROBUST)
     if has_aux:
         aux = aux_at_root(y, y_eval, aux, aux_t, args, fn=fn_aux)
     return RootResult(y, ok, no_root, aux if has_aux else None)

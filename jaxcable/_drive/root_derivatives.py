@@ -9,7 +9,7 @@ import jax
 import jax.numpy as jnp
 
 
-def _split(t_args, args) -> tuple[Any, Any]:
+def split_tangents(t_args, args) -> tuple[Any, Any]:
     """`args` split into its differentiated leaves (those with a tangent in `t_args`)
     and the rest, so that only the differentiated ones get tangents (the others
     stay symbolic zeros)."""
@@ -24,7 +24,7 @@ def _split(t_args, args) -> tuple[Any, Any]:
 
 
 @eqx.filter_custom_jvp
-def implicit_root(y, slope, args, *, fn):
+def implicit_root(y, slope, args, *, fn, slope_known=False):
     """The root `y` of fn(., args), differentiated in `args` by the implicit function
     theorem: dy = -(d fn / d args . dargs) / slope.
 
@@ -33,24 +33,26 @@ def implicit_root(y, slope, args, *, fn):
     differentiated evaluation of fn, not two (`jax.lax.custom_root` linearises fn in
     y again at the root). Where it is NaN (a root found by bisection, which evaluates
     no slopes) it is evaluated at the root here, in a loop that a batch without such
-    roots enters for one predicate only."""
-    del slope, args, fn
+    roots enters for one predicate only; with `slope_known`, `slope` is never NaN
+    (a solve that evaluated it at its root) and that loop is left out."""
+    del slope, args, fn, slope_known
     return y
 
 
 @implicit_root.def_jvp
-def _implicit_root_jvp(primals, tangents, *, fn):
+def _implicit_root_jvp(primals, tangents, *, fn, slope_known=False):
     y, slope, args = primals
     _, _, t_args = tangents
     if t_args is None:
         return y, None
-    diff, rest = _split(t_args, args)
+    diff, rest = split_tangents(t_args, args)
     _, rhs = jax.jvp(lambda d: fn(y, eqx.combine(d, rest)), (diff,), (t_args,))
 
     def root_slope(y, args):
         return jax.jvp(lambda y: fn(y, args), (y,), (jnp.ones_like(y),))[1]
 
-    slope = evaluate_where(jnp.isnan(slope), root_slope, y, args, slope)
+    if not slope_known:
+        slope = evaluate_where(jnp.isnan(slope), root_slope, y, args, slope)
     # A zero slope only occurs where the caller discards the root (e.g. a slack
     # cable); keep its tangent finite so that `jnp.where` does not leak NaNs.
     bad = (slope == 0) | ~jnp.isfinite(slope)
@@ -127,7 +129,7 @@ def _aux_at_root_jvp(primals, tangents, *, fn):
     t_y, _, _, _, t_args = tangents
     primal = _extrapolate(y, y_eval, aux, aux_t)
     t_y = jnp.zeros_like(y) if t_y is None else t_y
-    diff, rest = (None, args) if t_args is None else _split(t_args, args)
+    diff, rest = (None, args) if t_args is None else split_tangents(t_args, args)
     _, tangent = jax.jvp(
         lambda y, d: fn(y, eqx.combine(d, rest))[1], (y, diff), (t_y, t_args)
     )

@@ -14,9 +14,11 @@ from jaxtyping import Array, Bool, Float, Int, PyTree
 from .. import _checks
 from .._cable import Cable
 from .._drive import (
+    ROBUST,
     CableState,
     ElongationDrive,
     ElongationSample,
+    Solve,
     default_solver,
     init_state,
     step,
@@ -95,7 +97,9 @@ def _force_history(
     def body(carry: CableState, x):
         t, e, m, temp, cov = x
         here = _at_sample(cable, temp, cov)
-        new, _ = drive.step(model, here, carry, ElongationSample(t, e, m))
+        new, _, _ = drive.step(
+            model, here, carry, ElongationSample(t, e, m), Solve(ROBUST)
+        )
         return new, new.force
 
     final, force = jax.lax.scan(
