@@ -8,16 +8,17 @@ against (benchmarks/throughput.py) and checked to give the same numbers as the k
 
 prints one JSON object and a table: NumPy time, the kernel's time on the same problem
 (float64, jitted, median of `--repeats` calls after a warm-up call) and the largest
-relative difference.
+difference of elongation over a cable's samples relative to its peak (largest over
+the cables).
 
 It is the same model as `jaxcable.IntegratedModel.advance` (Park Eq. 1-9 with the
 readings of docs/model_notes.md: the instantaneous strain with hardening and the
 unloading line from the largest force, three delayed-elastic elements - permanent,
 short- and long-term recoverable - and an Eyring flow) and the same time solve as
 `jaxcable.simulate_rate_test` (Park Eq. 5 = Eq. 6 per force sample, relative strain
-residual, Newton with an analytic derivative): a Python loop over the samples,
-vectorised over the batch of cables, Newton iterations in NumPy until every cable of
-the batch has converged.
+residual, Newton with an analytic derivative and the kernel's final refinement step):
+a Python loop over the samples, vectorised over the batch of cables, Newton iterations
+in NumPy until every cable of the batch has converged.
 """
 
 import argparse
@@ -166,6 +167,8 @@ def simulate_rate_test_numpy(
     `strain`, `elongation` (m); and `converged` (batch,): every sample's Newton solve
     converged to a non-negative finite time and the parameters are in their domain.
     """
+    if max_steps < 1:
+        raise ValueError(f"`max_steps` must be >= 1, got {max_steps}.")
     if isinstance(protocol_arrays, Mapping):
         force_seq = protocol_arrays["force"]
         direction_seq = protocol_arrays["direction"]
@@ -282,15 +285,21 @@ def simulate_rate_test_numpy(
 
         slope_sign = -d if d != 0 else 1
         growth = 1e-6 / rate
-        converged = np.zeros(batch, bool)
         for _ in range(max_steps):
             r, dr = residual(dt)
             converged = np.abs(r) <= tol
+            step = r / np.where(dr == 0, 1.0, dr)
+            good = (dr * slope_sign > 0) & np.isfinite(step)
             if converged.all():
                 break
-            good = (dr * slope_sign > 0) & np.isfinite(r / np.where(dr == 0, 1, dr))
-            step = np.where(good, dt - r / np.where(dr == 0, 1.0, dr), 2 * dt + growth)
-            dt = np.where(converged, dt, np.maximum(step, 0.0))
+            grown = np.where(good, dt - step, 2 * dt + growth)
+            dt = np.where(converged, dt, np.maximum(grown, 0.0))
+        # A converged time takes one more Newton step as a refinement where that step
+        # is small (as the kernel): without it each sample's time is off by up to
+        # tol in relative strain, and the error adds up along a ramp (5e-11 of the
+        # peak over 1000 samples).
+        small = np.abs(step) <= 1e-3 * np.abs(dt) + 1e3 * growth
+        dt = np.where(converged & good & small, np.maximum(dt - step, 0.0), dt)
         ok &= converged & np.isfinite(dt) & (dt >= 0)
 
         total, _, new_state = strain_and_slope(dt)
@@ -384,9 +393,10 @@ def main():
             jax.block_until_ready(run(cable))
             times.append(time.perf_counter() - t0)
         t_jax = sorted(times)[len(times) // 2]
+        # The largest difference over a cable's samples / its peak elongation.
+        el = np.asarray(traj.elongation)
         diff = np.max(
-            np.abs(np.asarray(traj.elongation) - ref["elongation"])
-            / np.maximum(np.abs(ref["elongation"]), 1e-12)
+            np.max(np.abs(el - ref["elongation"]), axis=1) / np.max(np.abs(el), axis=1)
         )
         rows.append(
             dict(
@@ -395,19 +405,19 @@ def main():
                 numpy_s=t_np,
                 kernel_s=t_jax,
                 speedup=t_np / t_jax,
-                max_rel_diff=float(diff),
+                max_diff_of_peak=float(diff),
                 numpy_converged=int(ref["converged"].sum()),
             )
         )
     print(json.dumps(dict(machine=machine("float64"), rows=rows), indent=1))
     print()
     print(
-        f"{'batch':>6} {'samples':>8} {'numpy [s]':>10} {'kernel [s]':>11} {'speedup':>8} {'max rel diff':>13}"
+        f"{'batch':>6} {'samples':>8} {'numpy [s]':>10} {'kernel [s]':>11} {'speedup':>8} {'diff / peak':>12}"
     )
     for r in rows:
         print(
             f"{r['batch']:>6} {r['samples']:>8} {r['numpy_s']:>10.3f} {r['kernel_s']:>11.4f} "
-            f"{r['speedup']:>8.1f} {r['max_rel_diff']:>13.2e}"
+            f"{r['speedup']:>8.1f} {r['max_diff_of_peak']:>12.2e}"
         )
     if args.json_out:
         with open(args.json_out, "w") as f:

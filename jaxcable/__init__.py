@@ -44,6 +44,7 @@ from ._fit import (
     IdentifiabilityWarning as IdentifiabilityWarning,
     PaddedTests as PaddedTests,
     fit as fit,
+    fit_each as fit_each,
     make_loss as make_loss,
     model_responses as model_responses,
     pad_tests as pad_tests,

@@ -24,7 +24,7 @@ PROTOCOL = jc.Protocol.concatenate(
     jc.Protocol.cycles(150.0, 1, samples_per_ramp=60),
 )
 ROBUST = jc.Newton(tol=1e-12, unrolled=1, two_pass=False)
-TWO_PASS = jc.Newton(tol=1e-12, two_pass=True)
+TWO_PASS = jc.Newton(tol=1e-12, unrolled=3, two_pass=True)
 TIME = np.linspace(0.0, 600.0, 240)
 ELONGATION = 0.3 * 0.012 * np.sin(TIME / 120.0) ** 2
 
@@ -170,3 +170,11 @@ def test_bad_unrolled(bad):
 def test_bad_two_pass():
     with pytest.raises(ValueError, match="two_pass"):
         jc.Newton(tol=1e-12, two_pass="yes")
+
+
+def test_a_model_and_cable_of_two_dtypes_are_refused():
+    cable32 = jc.Cable(length=jnp.float32(0.3), speed=jnp.float32(5e-3 / 60))
+    with pytest.raises(ValueError, match="`model` has float64"):
+        jc.simulate_rate_test(MODEL, cable32, PROTOCOL)
+    with pytest.raises(ValueError, match="`model` has float64"):
+        jc.simulate_elongation_history(MODEL, cable32, TIME, ELONGATION)

@@ -1,7 +1,11 @@
 """`jaxcable fit`: a model fitted to measured tests, written as PARAMS.json, with a
-summary on stdout and optionally a report folder."""
+summary on stdout and optionally a report folder; with `--each`, every file fitted
+on its own (one `jaxcable.fit_each`), one PARAMS.json per file and a summary table."""
 
 import contextlib
+import csv
+import io
+import json
 import os
 import pathlib
 import warnings
@@ -10,11 +14,13 @@ import jax
 import numpy as np
 
 from .._cache import exported_programs_dir
+from .._files import write_text_atomic
 from .._fit import (
     FitResult,
     IdentifiabilityWarning,
     cached_fit_kernels,
     fit,
+    fit_each,
     resolve_drives,
 )
 from .._models import AbstractCableModel
@@ -123,6 +129,16 @@ def test_drives(tests, drive: str):
         raise CliError(f"--drive: {e}") from None
 
 
+def read_described(args, meter: AbstractProgressMeter):
+    """(tests, drives with their reasons) of the data files, after printing one line
+    per file."""
+    tests = read_tests(args.data, data_options(args), args.every, meter)
+    drives = test_drives(tests, args.drive)
+    print(f"read {len(tests)} file(s):")
+    print("\n".join(describe_tests(tests, args.every, drives)))
+    return tests, drives
+
+
 def fit_failure(result: FitResult) -> CliError | None:
     """The error to exit with (status 1) when the fit failed or did not converge."""
     if not np.isfinite(result.loss):
@@ -151,14 +167,13 @@ def fit_command(args) -> int:
     fit_names = names_option(args.fit, "--fit", model, name)
     per_test = names_option(args.per_test, "--per-test", model, name)
     require_folder_of(args.out, "--out")
+    if args.each:
+        return each_command(args, meter, model, name, fit_names, per_test)
     outputs = [("--out", args.out)]
     if args.report:
         outputs += report_files(args.report, FIT_REPORT_FILES)
     refuse_inputs(outputs, input_files(args))
-    tests = read_tests(args.data, data_options(args), args.every, meter)
-    drives = test_drives(tests, args.drive)
-    print(f"read {len(tests)} file(s):")
-    print("\n".join(describe_tests(tests, args.every, drives)))
+    tests, drives = read_described(args, meter)
     result = run_fit(
         model,
         name,
@@ -204,4 +219,121 @@ def fit_command(args) -> int:
         )
     if failure is not None:
         raise failure
+    return 0
+
+
+def add_out_options(parser) -> None:
+    """`--out` and `--each` of `jaxcable fit`."""
+    parser.add_argument(
+        "--out",
+        metavar="PARAMS.json",
+        required=True,
+        help="the file to write; with --each, the folder to write FILE.PARAMS.json "
+        "(FILE: each data file's name without its suffix) and summary.csv to",
+    )
+    parser.add_argument(
+        "--each",
+        action="store_true",
+        help="fit every data file on its own (one parameter set per file, all solved "
+        "at once by jaxcable.fit_each) instead of one parameter set to all of them",
+    )
+
+
+def _each_outputs(args) -> list[tuple[str, pathlib.Path]]:
+    """(option, path) of the files `--each` writes: one PARAMS.json per data file,
+    then summary.csv; fails when two files would write the same PARAMS.json."""
+    if args.report:
+        raise CliError("--report: not available with --each (one fit per file).")
+    folder = pathlib.Path(args.out)
+    if folder.exists() and not folder.is_dir():
+        raise CliError(f"--out {folder}: is a file; with --each it is a folder.")
+    seen: dict[str, str] = {}
+    for path in args.data:
+        stem = pathlib.Path(path).stem
+        if stem in seen:
+            raise CliError(
+                f"--each: {seen[stem]} and {path} would both write "
+                f"{stem}.PARAMS.json; give the files distinct names."
+            )
+        seen[stem] = str(path)
+    names = [f"{stem}.PARAMS.json" for stem in seen] + ["summary.csv"]
+    return [("--out", folder / name) for name in names]
+
+
+def _summary_rows(paths, results: list[FitResult]) -> tuple[list[str], list[list]]:
+    """The summary table: (header, rows) of file, result, RMSE (in the scored
+    channel's unit) and every fitted parameter (SI)."""
+    header = ["file", "result", "rmse", "rmse_unit", *results[0].names]
+    rows = []
+    for path, result in zip(paths, results):
+        rmse, unit = result.rmse(0)
+        # The result's name as PARAMS.json writes it.
+        name = json.loads(result.to_json())["result"]
+        rows.append([pathlib.Path(path).name, name, rmse, unit, *result.values])
+    return header, rows
+
+
+def _print_summary(header: list[str], rows: list[list]) -> None:
+    width = max(len(header[0]), *(len(r[0]) for r in rows))
+    print(
+        f"{header[0]:<{width}} {header[1]:<20} {'rmse':>10}      "
+        + "".join(f"{h[:11]:>12}" for h in header[4:])
+    )
+    for file, result, rmse, unit, *values in rows:
+        print(
+            f"{file:<{width}} {result[:20]:<20} {rmse:>10.4g} {unit:<4} "
+            + "".join(f"{v:>12.5g}" for v in values)
+        )
+
+
+def each_command(args, meter, model, name: str, fit_names, per_test) -> int:
+    """`jaxcable fit --each`: every data file fitted on its own by one
+    `jaxcable.fit_each`; writes FILE.PARAMS.json per fitted file and summary.csv to
+    the `--out` folder; the exit status (1 when a fit failed or did not converge)."""
+    outputs = _each_outputs(args)
+    refuse_inputs(outputs, input_files(args))
+    tests, drives = read_described(args, meter)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", IdentifiabilityWarning)
+        try:
+            results = fit_each(
+                model,
+                [[t] for t in tests],
+                fit=fit_names or None,
+                per_test=per_test or None,
+                multistart=args.starts,
+                max_steps=args.max_steps,
+                key=jax.random.key(args.seed),
+                drive=[d.drive for d in drives],
+                progress_meter=meter,
+            )
+        except ValueError as e:
+            raise CliError(f"cannot fit model '{name}': {e}") from None
+    header, rows = _summary_rows(args.data, results)
+    print()
+    _print_summary(header, rows)
+    print()
+    folder = pathlib.Path(args.out)
+    make_folder(folder, "--out")
+    say_replacing([path for _, path in outputs], "--out")
+    written = 0
+    with write_errors("--out", folder):
+        for (_, path), result in zip(outputs, results):
+            # A fit that failed has nothing worth writing (as without --each).
+            if np.isfinite(result.loss):
+                result.to_json(path)
+                written += 1
+        table = io.StringIO()
+        csv.writer(table, lineterminator="\n").writerows([header, *rows])
+        write_text_atomic(outputs[-1][1], table.getvalue())
+    print(f"wrote {written} PARAMS.json file(s) and summary.csv to {folder}{os.sep}")
+    failed = [row[0] for row, r in zip(rows, results) if not r.converged]
+    if failed:
+        shown = ", ".join(failed[:5]) + (", ..." if len(failed) > 5 else "")
+        raise CliError(
+            f"{len(failed)} of {len(results)} fits failed or did not converge "
+            f"({shown}); see summary.csv. Try more --max-steps, other start values "
+            "(--params) or fewer parameters (--fit).",
+            status=1,
+        )
     return 0

@@ -17,7 +17,7 @@ from .cache import cache_command
 from .common import PROG, CliError
 from .demo import demo_command
 from .diagnose import diagnose_command
-from .fit import fit_command
+from .fit import add_out_options, fit_command
 from .simulate import simulate_command
 
 
@@ -366,9 +366,7 @@ def _fit(commands) -> None:
         "parameter name -> value (SI units) replacing the model's defaults; fixed "
         "parameters keep these values",
     )
-    fit.add_argument(
-        "--out", metavar="PARAMS.json", required=True, help="the file to write"
-    )
+    add_out_options(fit)
     what = _add_report_data_and_fit(
         fit,
         "write plots (fit_loops.png: measured vs model force-elongation, one "

@@ -201,7 +201,9 @@ class RateDrive(AbstractDrive):
             zero = jnp.zeros_like(duration)
             _, parts0 = model.advance(state.model_state, cable, zero, force, branch)
             jump = jnp.abs(parts0.total - state.strain) / cable.strain_rate
-            return jnp.where(branch != 0, jump, duration)
+            # In the dtype of the carry (a float32 cable with float64 parameters
+            # computes the jump in float64).
+            return jnp.where(branch != 0, jump, duration).astype(state.last_step.dtype)
 
         if solve.how == REPLAY:
             guess = solve.root

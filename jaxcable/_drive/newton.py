@@ -13,6 +13,7 @@ from jax.ad_checkpoint import checkpoint_name
 from jaxtyping import Array, Bool, Float, Int
 
 from .bracket import Bracket
+from .optimistix_root import optimistix_root
 from .root_derivatives import (
     aux_at_root,
     evaluate_where,
@@ -61,7 +62,10 @@ class Newton(eqx.Module):
         a few float32 epsilons at most in single precision.
     - `max_steps`: the most Newton steps in all; beyond it the sample is flagged
         `RESULTS.newton_failed` (or solved by the bracket fallback).
-    - `unrolled`: the Newton steps every sample takes before any loop (>= 1).
+    - `unrolled`: the Newton steps every sample takes before any loop (>= 1);
+        None (the default): 2 in one pass, 3 in two (a first pass that needs the
+        robust one costs a whole second pass, so it takes one step more; with
+        coarse samples, such as fewer than ~100 a ramp, a fourth can pay).
     - `two_pass`: solve a history in two passes (True) or one (False); None (the
         default): two on an accelerator, one on a CPU (`branches_are_cheap`). The
         results agree to the tolerance either way.
@@ -69,12 +73,14 @@ class Newton(eqx.Module):
 
     tol: float
     max_steps: int = 32
-    unrolled: int = 3
+    unrolled: int | None = None
     two_pass: bool | None = None
 
     def __check_init__(self):
         for name, least in (("max_steps", 1), ("unrolled", 1)):
             value = getattr(self, name)
+            if name == "unrolled" and value is None:
+                continue
             if not isinstance(value, int) or isinstance(value, bool) or value < least:
                 raise ValueError(
                     f"Newton: `{name}` must be an int >= {least}, got {value!r}."
@@ -90,6 +96,13 @@ class Newton(eqx.Module):
         if self.two_pass is None:
             return not branches_are_cheap()
         return self.two_pass
+
+    @property
+    def steps_unrolled(self) -> int:
+        """The unrolled Newton steps here (see `unrolled`)."""
+        if self.unrolled is None:
+            return 3 if self.in_two_passes else 2
+        return self.unrolled
 
 
 def branches_are_cheap() -> bool:
@@ -121,27 +134,6 @@ def _converged(previous, residual, plain, tol):
 # steps of a first pass; or the replay of a root already known (its derivatives and
 # fn's output there).
 ROBUST, FAST, REPLAY = "robust", "fast", "replay"
-
-
-def _past_turning_point(fn, y, args, slope_sign, growth, max_steps: int = 32):
-    """Grow y <- 2 y + growth until fn's slope at y has the sign `slope_sign`."""
-
-    def wrong_side(y):
-        _, slope = jax.jvp(lambda y: fn(y, args), (y,), (jnp.ones_like(y),))
-        return ~(slope * slope_sign > 0)
-
-    def cond(c):
-        y, k = c
-        return (k < max_steps) & wrong_side(y)
-
-    def body(c):
-        y, k = c
-        return 2 * y + growth, k + 1
-
-    y, _ = jax.lax.while_loop(cond, body, (y, jnp.array(0)))
-    # Only the start of the solve: its derivatives come from the implicit function
-    # theorem at the root, not from here.
-    return jax.lax.stop_gradient(y)
 
 
 # Bisection halves the bracket each step: 100 steps take a bracket of 1e7 s (or N)
@@ -264,24 +256,11 @@ def root_scalar(
         residual_fn = fn
         fn_aux = lambda y, args: (residual_fn(y, args), None)
     if isinstance(solver, optx.AbstractRootFinder):
-        if slope_sign is not None:
-            guess = _past_turning_point(fn, guess, args, slope_sign, growth)
-        sol = optx.root_find(
-            fn,
-            solver,
-            guess,
-            args=args,
-            options=dict(lower=lower),
-            max_steps=256,
-            throw=False,
+        y, converged, no_root = optimistix_root(
+            fn, solver, guess, args, lower, slope_sign, growth
         )
-        converged = sol.result == optx.RESULTS.successful
-        # optimistix keeps no bracket: only the two ends of the search are seen.
-        y = sol.value
-        seen = Bracket.empty(y, slope_sign)
-        seen = seen.see(guess, fn(guess, args)).see(y, fn(y, args))
         aux = fn_aux(y, args)[1] if has_aux else None
-        return RootResult(y, converged, ~converged & ~seen.found, aux)
+        return RootResult(y, converged, no_root, aux)
     if not isinstance(solver, Newton):
         raise ValueError(
             "`solver` must be a jaxcable.Newton or an optimistix root finder, got "
@@ -396,7 +375,7 @@ def root_scalar(
         return settle(s)
 
     def fixed_steps(g, args, y0):
-        # `solver.unrolled` Newton steps and no loop: the first of two passes.
+        # `solver.steps_unrolled` Newton steps and no loop: the first of two passes.
         f = lambda y: g(y, args)
         inf = jnp.full_like(y0, jnp.inf)
         no = jnp.zeros_like(y0, dtype=bool)
@@ -404,7 +383,7 @@ def root_scalar(
         bracket = Bracket.empty(y0, slope_sign)
         state = _SolveState(y0, inf, inf, bracket, no, no, 0, zero, zero, y0, inf)
         y_eval, aux, aux_t = y0, None, None
-        for _ in range(solver.unrolled):
+        for _ in range(solver.steps_unrolled):
             state, (y_eval, aux, aux_t) = newton(state, f, with_aux=True)
         ok = state.converged & jnp.isfinite(state.y)
         return state.y, state.slope, ok, y_eval, aux, aux_t
@@ -435,15 +414,15 @@ def root_scalar(
         shape = jax.eval_shape(lambda y: f(y)[1], y0)
         aux = jax.tree_util.tree_map(lambda a: jnp.zeros(a.shape, a.dtype), shape)
         y_eval, aux_t = y0, aux
-        for i in range(solver.unrolled):
-            if i < solver.unrolled - 1:
+        for i in range(solver.steps_unrolled):
+            if i < solver.steps_unrolled - 1:
                 state = newton(state, f)
             else:
                 state, (y_eval, aux, aux_t) = newton(state, f, with_aux=True)
         # Where the last unrolled evaluation was within the tolerance, the root is
         # that point plus one refinement step, and fn's output there follows from
         # the evaluation's (`aux_at_root`).
-        fresh = state.converged & (solver.unrolled > 0)
+        fresh = state.converged
         state = jax.lax.while_loop(
             newton_on,
             lambda s: newton(s, lambda y: g(y, loop_tied(args, s.steps))),

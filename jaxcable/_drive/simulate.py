@@ -3,6 +3,8 @@ user's own scan) and [`jaxcable.simulate_force_history`][],
 [`jaxcable.simulate_rate_test`][], [`jaxcable.simulate_elongation_history`][] (a whole
 history, each a drive fed to the one scan kernel), with the checks of their inputs."""
 
+import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
@@ -138,6 +140,7 @@ def simulate_rate_test(
     A [`jaxcable.Trajectory`][] whose `time` holds the solved sample times, s.
     """
     check_protocol(cable, protocol)
+    check_dtypes(model, cable)
     if solver is None:
         solver = default_solver(jnp.result_type(float, cable.length))
     return scan.run(RateDrive(protocol, solver), model, cable, throw, checkpoint)
@@ -175,6 +178,7 @@ def simulate_elongation_history(
     A [`jaxcable.Trajectory`][] whose `force` holds the solved forces, N.
     """
     time, elongation, mask = check_history(cable, time, elongation, mask, "elongation")
+    check_dtypes(model, cable)
     if solver is None:
         solver = default_solver(jnp.result_type(float, cable.length))
     drive = ElongationDrive(ElongationSample(time, elongation, mask), solver)
@@ -230,6 +234,24 @@ def check_history(
     x = jnp.asarray(x, dtype)
     mask = jnp.ones(time.shape, bool) if mask is None else jnp.asarray(mask, bool)
     return time, x, mask
+
+
+def check_dtypes(model: AbstractCableModel, cable: Cable) -> None:
+    """Check that a solved simulation's model and cable share one float dtype (the
+    solve's iterates, in the cable's dtype, must not turn into the model's).
+
+    **Raises:**
+
+    `ValueError` naming the argument.
+    """
+    wanted = jnp.result_type(float, cable.length)
+    for leaf in jax.tree_util.tree_leaves(eqx.filter(model, eqx.is_inexact_array)):
+        if leaf.dtype != wanted:
+            raise ValueError(
+                f"`model` has {leaf.dtype} parameters but `cable` is {wanted}: a "
+                "solved simulation needs one dtype; convert one of them, e.g. "
+                "`jax.tree.map(lambda x: x.astype(jnp.float32), model)`."
+            )
 
 
 def check_protocol(cable: Cable, protocol: Protocol) -> None:

@@ -5,6 +5,7 @@ from .data import (
     resolve_drives as resolve_drives,
     test_id as test_id,
 )
+from .each import fit_each as fit_each
 from .exported import cached_fit_kernels as cached_fit_kernels
 from .fit import fit as fit, make_loss as make_loss
 from .parameters import declared_parameters as declared_parameters, field_at as field_at

@@ -1,0 +1,328 @@
+"""Many specimens fitted at once, each its own parameter set: `jaxcable.fit_each`.
+
+Every specimen is the least-squares problem [`jaxcable.fit`][] would solve for its
+tests alone; the specimens' padded tests are stacked and the fit's kernel (the
+data-derived start, the multi-start Levenberg-Marquardt, the Jacobian at the optimum)
+is vmapped over them, so that one compiled program solves them all.
+"""
+
+import dataclasses
+import warnings
+from collections.abc import Mapping, Sequence
+
+import equinox as eqx
+import jax
+import jax.random as jr
+import numpy as np
+import optimistix as optx
+from jaxtyping import Array, Float, PRNGKeyArray
+
+from .._drive import AbstractTestDrive
+from .._io import TestData
+from .._models import AbstractCableModel
+from .._progress import AbstractProgressMeter, NoProgressMeter, check_progress_meter
+from .._results import RESULTS
+from .data import PaddedTests, as_test_list, pad_tests
+from .fit import _checked_solver, fit_result
+from .problem import Problem, make_problem, require_enough_samples
+from .result import FitResult, concrete_result
+from .solver import KernelOut, fit_kernel
+from .specimens import (
+    Group,
+    failed_result,
+    group_problem,
+    grouped,
+    lane,
+    start_failure,
+)
+from .statistics import IdentifiabilityWarning
+
+
+def _specimen_list(specimens) -> list[list]:
+    """`specimens` as a non-empty list of non-empty test lists.
+
+    **Raises:**
+
+    `ValueError` naming `specimens` (or `specimens[k]`) otherwise.
+    """
+    if isinstance(specimens, (str, bytes, TestData)) or not isinstance(
+        specimens, Sequence
+    ):
+        raise ValueError(
+            "`specimens` must be a sequence with one entry per specimen (a list of "
+            f"its tests, or one TestData), got {type(specimens).__name__}."
+        )
+    if not specimens:
+        raise ValueError("`specimens` is empty: give at least one specimen to fit.")
+    out = []
+    for k, tests in enumerate(specimens):
+        try:
+            out.append(as_test_list(tests))
+        except ValueError as e:
+            raise ValueError(f"`specimens[{k}]`: {e}") from None
+    return out
+
+
+def _drives(drive, n: int) -> list:
+    """One `drive` argument of `jaxcable.fit` per specimen."""
+    if drive is None or isinstance(drive, (str, AbstractTestDrive)):
+        return [drive] * n
+    if not isinstance(drive, Sequence):
+        raise ValueError(
+            '`drive` must be "auto", "force", "elongation", a drive, or a sequence '
+            f"with one of these per specimen, got {type(drive).__name__}."
+        )
+    if len(drive) != n:
+        raise ValueError(
+            f"`drive` gives {len(drive)} entries for {n} specimens; give one drive, "
+            "or one entry per specimen."
+        )
+    return list(drive)
+
+
+def _checked_key(key) -> PRNGKeyArray:
+    """`key`, or `jax.random.key(0)` for None."""
+    if key is None:
+        return jr.key(0)
+    typed = isinstance(key, jax.Array) and jax.dtypes.issubdtype(
+        key.dtype, jax.dtypes.prng_key
+    )
+    raw = isinstance(key, (jax.Array, np.ndarray)) and (
+        key.dtype == np.uint32 and key.shape == (2,)
+    )
+    if not (typed and key.shape == () or raw):
+        raise TypeError(
+            f"`key` must be one jax.random key (jax.random.key(seed)), got {key!r}."
+        )
+    return key
+
+
+@eqx.filter_jit
+def _domain(model: AbstractCableModel, cables) -> RESULTS:
+    """`model.check` of every test's cable, shape (specimens, tests)."""
+    return jax.vmap(jax.vmap(model.check))(cables)
+
+
+@eqx.filter_jit
+def each_kernel(
+    problem: Problem,
+    data: PaddedTests,
+    u_user: Float[Array, " p"],
+    key: PRNGKeyArray,
+    solver: optx.AbstractGaussNewton,
+    max_steps: int,
+    jac: str,
+    num_starts: int,
+    spread: float,
+) -> KernelOut:
+    """`fit_kernel` of every specimen, vmapped: `problem` with its data replaced by
+    each specimen's (`data`, stacked on a leading axis); the other arguments as in
+    `fit_kernel`, the same for every specimen.
+
+    The solver's loop runs until every specimen's solve has stopped. A specimen
+    whose start does not simulate (its result is discarded) stops at its first
+    step, on non-finite residuals, unless its data-derived start simulates: then
+    it costs what its own solve costs.
+
+    **Returns:**
+
+    The `KernelOut` of every specimen, stacked on a leading axis.
+    """
+
+    def one(d: PaddedTests) -> KernelOut:
+        return fit_kernel(
+            eqx.tree_at(lambda p: p.data, problem, d),
+            u_user,
+            key,
+            solver,
+            max_steps,
+            jac,
+            num_starts,
+            spread,
+        )
+
+    return jax.vmap(one)(data)
+
+
+def _solve_group(
+    model: AbstractCableModel,
+    group: Group,
+    checks: RESULTS,
+    template: Problem,
+    settings: tuple,
+    per: tuple[str, ...],
+) -> list[FitResult]:
+    """The `FitResult` of every specimen of `group` (`checks`: the model's domain
+    check of each of their tests; `settings`: the kernel's `key, solver,
+    max_steps, multistart, spread`)."""
+    problem, u_user = group_problem(model, template, group)
+    layout = problem.layout
+    key, solver, max_steps, multistart, spread = settings
+    # Every specimen has more fitted samples than parameters: forward mode, as
+    # `jaxcable.fit` chooses.
+    out = each_kernel(
+        problem, group.data, u_user, key, solver, max_steps, "fwd", multistart, spread
+    )
+    host = jax.device_get(out)
+    bad_domain = np.asarray(checks._value) != int(RESULTS.successful._value)
+    units = tuple(u for u, s in zip(layout.units, layout.sizes) for _ in range(s))
+    results = []
+    for j, tests in enumerate(group.tests):
+        here = eqx.tree_at(lambda p: p.data, problem, lane(group.host, j))
+        if bad_domain[j].any():
+            i = int(np.flatnonzero(bad_domain[j])[0])
+            member = concrete_result(lane(lane(checks, j), i))
+        elif not host.start_ok[j].all():
+            member = start_failure(model, tests, group.host.drive, host.start_ok[j])
+        else:
+            # Moved back in one call: the fitted model's leaves are device arrays,
+            # as `jaxcable.fit`'s.
+            out_j = lane(host, j)
+            out_j = eqx.tree_at(lambda o: o.params, out_j, jax.device_put(out_j.params))
+            results.append(
+                fit_result(out_j, here, tests, layout.labels, units, per, False)
+            )
+            continue
+        results.append(failed_result(model, here, tests, per, multistart, member))
+    return results
+
+
+def _template(groups: list[Group], checks: list, drives: list) -> tuple[list, object]:
+    """(tests, drive) of the first specimen whose cables all pass the model's
+    domain check: `make_problem` of it gives every group's layout.
+
+    **Raises:**
+
+    `ValueError` naming `model` when there is none.
+    """
+    ok = int(RESULTS.successful._value)
+    for group, check in zip(groups, checks):
+        for j, k in enumerate(group.indices):
+            if (np.asarray(check._value)[j] == ok).all():
+                return group.tests[j], drives[k]
+    raise ValueError(
+        "`model`: its parameters are outside their domain for a cable of every "
+        "specimen (e.g. Park's t_r2 = lambda1 (L0/v)^2 - lambda2 <= 0); give start "
+        "values valid for the specimens' cables."
+    )
+
+
+def fit_each(
+    model: AbstractCableModel,
+    specimens,
+    *,
+    fit: Sequence[str] | None = None,
+    per_test: Sequence[str] | None = None,
+    transforms: Mapping[str, str] | None = None,
+    solver: optx.AbstractGaussNewton | None = None,
+    max_steps: int = 256,
+    multistart: int = 4,
+    spread: float = 0.5,
+    key: PRNGKeyArray | None = None,
+    drive="auto",
+    covariate: str | None = None,
+    progress_meter: AbstractProgressMeter | None = None,
+) -> list[FitResult]:
+    """Fit one parameter set per specimen, all specimens in one compiled solve.
+
+    Each specimen (a list of tests) is the problem [`jaxcable.fit`][] solves for
+    those tests: the same residuals, data-derived start, multi-start
+    Levenberg-Marquardt and standard errors, from the same start `model`. The
+    specimens' padded tests are padded further to one length (padding samples
+    neither drive the model nor enter the residual) and stacked, and the fit's
+    kernel is vmapped over them: one compiled program solves every specimen, each
+    with its own steps (the loop runs until the last specimen has converged). Each
+    specimen's parameters equal those of `jaxcable.fit(model, tests, ...)` with the
+    same arguments, up to rounding. Specimens whose tests differ in number or in
+    drive are solved by one program per such group.
+
+    A specimen that fails does not stop the others: its `FitResult` has NaN values
+    and its [`jaxcable.RESULTS`][] member in `result`: the member of the model's
+    domain check when the start parameters are outside their domain for one of its
+    cables (e.g. `parameter_out_of_domain`), the simulation's member when the start
+    does not simulate on one of its tests (where `jaxcable.fit` raises), else the
+    solver's result as with `jaxcable.fit(..., throw=False)` (e.g.
+    `nonlinear_max_steps_reached`, `every_start_failed`). Identifiability warnings
+    are kept in each result's `warnings`, and one
+    [`jaxcable.IdentifiabilityWarning`][] names the specimens that have any.
+
+    **Arguments:**
+
+    - `model`: the start model of every specimen, as in [`jaxcable.fit`][].
+    - `specimens`: a sequence with one entry per specimen: its tests, as
+        `jaxcable.fit` takes them (a [`jaxcable.TestData`][] or a list of them).
+    - `fit`, `per_test`, `transforms`, `solver`, `max_steps`, `multistart`,
+        `spread`, `covariate`: as in [`jaxcable.fit`][], for every specimen.
+    - `key`: the key of the start perturbations, the same for every specimen
+        (default `jax.random.key(0)`, as `jaxcable.fit`).
+    - `drive`: as in [`jaxcable.fit`][] for every specimen, or a sequence with one
+        such entry per specimen.
+    - `progress_meter`: how progress is shown ([`jaxcable.NoProgressMeter`][], the
+        default, says nothing).
+
+    **Returns:**
+
+    A list of [`jaxcable.FitResult`][], one per specimen, in order.
+
+    **Raises:**
+
+    `ValueError` naming the argument: `specimens` not a sequence of specimens, or a
+    specimen's tests malformed or with fewer fitted samples than parameters
+    (`specimens[k]`, with the test and field); `model`, `fit`, `per_test`,
+    `transforms`, `solver`, `max_steps`, `multistart`, `spread` or `drive` as
+    `jaxcable.fit` refuses them, or `model` outside its domain for every specimen;
+    `progress_meter` not a progress meter. `TypeError` naming `key` when it is not
+    one random key.
+    """
+    solver = _checked_solver(multistart, max_steps, spread, solver)
+    meter = check_progress_meter(progress_meter, NoProgressMeter())
+    key = _checked_key(key)
+    if not isinstance(model, AbstractCableModel):
+        raise ValueError(
+            "`model` must be a jaxcable model (an AbstractCableModel instance such as "
+            f"jaxcable.IntegratedModel()), got {type(model).__name__}."
+        )
+    specimen_list = _specimen_list(specimens)
+    drives = _drives(drive, len(specimen_list))
+    datas = []
+    with meter.bar("checking the specimens", len(specimen_list)) as bar:
+        for k, (tests, d) in enumerate(zip(specimen_list, drives)):
+            try:
+                datas.append(pad_tests(tests, drive=d, covariate=covariate))
+            except ValueError as e:
+                raise ValueError(f"`specimens[{k}]`: {e}") from None
+            bar.advance()
+    groups = grouped(specimen_list, datas)
+    checks = [jax.device_get(_domain(model, g.data.cable)) for g in groups]
+    template = _template(groups, checks, drives)
+    problem, _ = make_problem(
+        model, template[0], fit, per_test, transforms, template[1], covariate
+    )
+    for k, data in enumerate(datas):
+        size = dataclasses.replace(problem.layout, num_tests=data.num_tests).size
+        try:
+            require_enough_samples(data, size)
+        except ValueError as e:
+            raise ValueError(f"`specimens[{k}]`: {e}") from None
+    layout = problem.layout
+    per = tuple(n for n, q in zip(layout.names, layout.per_test) if q)
+    settings = (key, solver, max_steps, multistart, spread)
+    results: list = [None] * len(specimen_list)
+    label = f"fitting {len(specimen_list)} specimens"
+    with meter.bar(label), warnings.catch_warnings():
+        warnings.simplefilter("ignore", IdentifiabilityWarning)
+        for group, check in zip(groups, checks):
+            fitted = _solve_group(model, group, check, problem, settings, per)
+            for k, r in zip(group.indices, fitted):
+                results[k] = r
+    flagged = [k for k, r in enumerate(results) if r.warnings]
+    if flagged:
+        shown = ", ".join(str(k) for k in flagged[:10])
+        more = f" and {len(flagged) - 10} more" if len(flagged) > 10 else ""
+        warnings.warn(
+            f"{len(flagged)} of {len(results)} specimens have identifiability "
+            f"warnings (specimens {shown}{more}); see each FitResult.warnings.",
+            IdentifiabilityWarning,
+            stacklevel=2,
+        )
+    return results
