@@ -63,9 +63,11 @@ class Newton(eqx.Module):
     - `max_steps`: the most Newton steps in all; beyond it the sample is flagged
         `RESULTS.newton_failed` (or solved by the bracket fallback).
     - `unrolled`: the Newton steps every sample takes before any loop (>= 1);
-        None (the default): 2 in one pass, 3 in two (a first pass that needs the
-        robust one costs a whole second pass, so it takes one step more; with
-        coarse samples, such as fewer than ~100 a ramp, a fourth can pay).
+        None (the default): in one pass, 2, or 1 for a single-precision `tol`
+        (above 1e-9: the guess along a ramp is often within it already, and the
+        loop then never runs); in two, 3 (a first pass that needs the robust one
+        costs a whole second pass; with coarse samples, such as fewer than ~100 a
+        ramp, a fourth can pay). Measured in benchmarks/README.md.
     - `two_pass`: solve a history in two passes (True) or one (False); None (the
         default): two on an accelerator, one on a CPU (`branches_are_cheap`). The
         results agree to the tolerance either way.
@@ -101,7 +103,9 @@ class Newton(eqx.Module):
     def steps_unrolled(self) -> int:
         """The unrolled Newton steps here (see `unrolled`)."""
         if self.unrolled is None:
-            return 3 if self.in_two_passes else 2
+            if self.in_two_passes:
+                return 3
+            return 1 if self.tol > 1e-9 else 2
         return self.unrolled
 
 
