@@ -140,17 +140,6 @@ def test_gradients_in_two_passes_equal_the_robust_path_and_finite_differences():
     np.testing.assert_allclose(fast.E2r, fd, rtol=1e-5)
 
 
-def test_forward_mode_and_jit_agree_in_two_passes():
-    def elongation_end(e2r):
-        model = eqx.tree_at(lambda m: m.E2r, MODEL, e2r)
-        traj = jc.simulate_rate_test(model, CABLE, PROTOCOL, solver=TWO_PASS)
-        return traj.elongation[-1]
-
-    _, tangent = jax.jvp(elongation_end, (MODEL.E2r,), (jnp.ones_like(MODEL.E2r),))
-    grad = jax.jit(jax.grad(elongation_end))(MODEL.E2r)
-    np.testing.assert_allclose(tangent, grad, rtol=1e-10)
-
-
 def test_the_first_pass_has_no_loop_and_no_branch_off_the_cpu(monkeypatch):
     # Off the CPU every loop or branch of a sample reads its predicate back to the
     # host: the first pass of a rate-driven test has none (its guess is a select),
