@@ -92,11 +92,15 @@ def test_one_scan_per_simulation():
         )(model)
         return str(jaxpr).count("scan["), len(jaxpr.jaxpr.eqns)
 
-    (scans_a, len_a), (scans_b, len_b) = size(10), size(200)
+    # A history of over 512 samples is a scan of blocks, each a scan; a shorter
+    # one a flat scan.
+    (scans_a, len_a), (scans_b, len_b) = size(300), size(1200)
     # A scan of blocks per pass: two passes on an accelerator (fixed Newton steps;
     # the robust solve where needed), one on a CPU.
     passes = 2 if jc.Newton(tol=1e-12).in_two_passes else 1
     assert scans_a == scans_b == 2 * passes
+    short, _ = size(10)
+    assert short == passes
     assert len_a == len_b
 
 

@@ -101,8 +101,10 @@ class _Output(eqx.Module):
     root: Float[Array, ""]
 
 
-# Samples per block of the forward scan (see `_scan`).
+# Samples per block of the forward scan, for histories of more than `BLOCK_ABOVE`
+# samples (see `_scan`).
 BLOCK = 16
+BLOCK_ABOVE = 512
 
 
 def _scan(body, carry: CableState, xs, checkpoint: int | None):
@@ -110,10 +112,12 @@ def _scan(body, carry: CableState, xs, checkpoint: int | None):
     with `checkpoint`, blocks of that many samples whose body is rematerialised
     (`jax.checkpoint`) in the backward pass.
 
-    Blocks, even without `checkpoint`: a flat scan over a long history writes each
-    sample's outputs into arrays of the history's length, which XLA's CPU backend
-    copies on every iteration of the loop (the outputs are in its carry); a scan of
-    `BLOCK` samples writes into a block, and the outer scan writes whole blocks.
+    Blocks, even without `checkpoint`, for a history of more than `BLOCK_ABOVE`
+    samples: a flat scan over a long history writes each sample's outputs into
+    arrays of the history's length, which XLA's CPU backend copies on every
+    iteration of the loop (the outputs are in its carry); a scan of `BLOCK` samples
+    writes into a block, and the outer scan writes whole blocks. A shorter history
+    is one flat scan: its copies are small, and a nested scan costs compile time.
     Same operations on the same values, in the same order: results are identical.
 
     Reverse-mode memory with `checkpoint` grows as (samples / checkpoint) carries
@@ -136,7 +140,9 @@ def _scan(body, carry: CableState, xs, checkpoint: int | None):
         raise ValueError(f"`checkpoint` must be a positive int, got {checkpoint!r}.")
     samples, roots = xs
     n = jnp.shape(samples.mask)[0]
-    size = min(BLOCK, n) if checkpoint is None else checkpoint
+    if checkpoint is None and n <= BLOCK_ABOVE:
+        return jax.lax.scan(body, carry, xs)
+    size = BLOCK if checkpoint is None else checkpoint
     blocks = -(-n // size)
     pad = blocks * size - n
 
