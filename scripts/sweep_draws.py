@@ -14,6 +14,11 @@ sign of `lambda2` kept), length log-uniform in [0.1, 10] m, crosshead speed
 log-uniform in [1, 1000] mm/min, peak force uniform in [5, 60] % of the breaking
 load (2000 N).
 
+Each rate test also runs on the robust path alone (one Newton step, then its loops:
+`jaxcable.Newton(tol, unrolled=1, two_pass=False)`) and in two passes
+(`two_pass=True`, as on an accelerator): the default's verdict must be theirs, and
+its successful trajectories within 1e-10 of the robust path's peak.
+
 Every rate test that fails is checked independently of the solver: the residual of
 Park Eq. 6 at the first failing sample is evaluated on a grid of 400 loading times
 (crosshead strains 1e-9 to 1e4) and its crossings of zero in the wanted direction
@@ -24,7 +29,8 @@ one, is counted as misclassified.
     python scripts/sweep_draws.py --draws 100000 --out sweep.json
 
 Prints a JSON summary and a table; exits 1 if a value is non-finite without a
-failure status, a failure is misclassified, or the elongation history of a
+failure status, a failure is misclassified, a verdict differs from the robust path's
+or the two-pass one's, or the elongation history of a
 successful rate test gives other forces (by more than 1e-6 of the peak) without a
 failure status.
 """
@@ -46,6 +52,7 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 import jaxcable as jc  # noqa: E402
+from jaxcable._drive import Solve  # noqa: E402
 from jaxcable._drive.drives import (  # noqa: E402
     _STRAIN_FLOOR,
     RateDrive,
@@ -57,6 +64,8 @@ from jaxcable._drive.drives import (  # noqa: E402
 
 # Every field of the model is a parameter (the model's own list, not a copy).
 PARAMETERS = tuple(f.name for f in dataclasses.fields(jc.IntegratedModel))
+ROBUST_SOLVER = jc.Newton(tol=1e-12, unrolled=1, two_pass=False)
+TWO_PASS_SOLVER = jc.Newton(tol=1e-12, two_pass=True)
 PROTOCOL = jc.Protocol.cycles(1.0, cycles=2, samples_per_ramp=50, hold=60.0)
 GRID = jnp.asarray(np.concatenate([[0.0], np.logspace(-9, 4, 399)]))
 NAMES = [name for name in jc.RESULTS._name_to_item]  # noqa: SLF001
@@ -89,13 +98,19 @@ def one(params, length_mm, rate_mm_per_min, peak):
         lambda p: p.force, PROTOCOL, PROTOCOL.force * peak * cable.breaking_load
     )
     rate = jc.simulate_rate_test(model, cable, protocol, throw=False)
+    robust = jc.simulate_rate_test(
+        model, cable, protocol, throw=False, solver=ROBUST_SOLVER
+    )
+    two_pass = jc.simulate_rate_test(
+        model, cable, protocol, throw=False, solver=TWO_PASS_SOLVER
+    )
 
     # The solver-free check: the state before each sample, from the same drive.
     drive = RateDrive(protocol, default_solver(jnp.float64))
     state0, samples = drive.init(model, cable)
 
     def body(state, sample):
-        new, _ = drive.step(model, cable, state, sample)
+        new, _, _ = drive.step(model, cable, state, sample, Solve("robust"))
         return new, (state, code(new.result))
 
     _, (before, results) = jax.lax.scan(body, state0, samples)
@@ -111,7 +126,7 @@ def one(params, length_mm, rate_mm_per_min, peak):
         sample.duration,
         jnp.abs(state.strain) + _STRAIN_FLOOR,
     )
-    residual = jax.vmap(lambda dt: _time_residual(dt, problem))(
+    residual = jax.vmap(lambda dt: _time_residual(dt, problem)[0])(
         GRID / cable.strain_rate
     )
     # A root in the solver's sense: a crossing from "not reached" (r * s < 0) to
@@ -129,8 +144,17 @@ def one(params, length_mm, rate_mm_per_min, peak):
         model, cable, time_, jnp.where(ok, rate.elongation, 0.0), throw=False
     )
     scale_f = peak * cable.breaking_load
+    both_ok = (rate.result == jc.RESULTS.successful) & (
+        robust.result == jc.RESULTS.successful
+    )
+    peak = jnp.max(jnp.abs(jnp.where(both_ok, robust.elongation, 1.0)))
     return dict(
         rate=code(rate.result),
+        robust=code(robust.result),
+        two_pass=code(two_pass.result),
+        robust_err=jnp.where(
+            both_ok, jnp.max(jnp.abs(rate.elongation - robust.elongation)) / peak, 0.0
+        ),
         rate_finite=jnp.all(jnp.isfinite(rate.time) & jnp.isfinite(rate.strain)),
         scan_agrees=results[-1] == code(rate.result),
         has_root=has_root,
@@ -193,6 +217,11 @@ def main(argv=None):
             newton_failed_without_root=int(np.sum(newton & ~o["has_root"])),
         ),
         silent_nonfinite=silent,
+        verdict_differs=dict(
+            from_robust=int(np.sum(o["rate"] != o["robust"])),
+            from_two_pass=int(np.sum(o["rate"] != o["two_pass"])),
+        ),
+        max_difference_from_robust_of_peak=float(o["robust_err"].max()),
         scan_disagrees=int(np.sum(~o["scan_agrees"])),
         on_successful_rate_tests=dict(
             count=int(rate_ok.sum()),
@@ -225,6 +254,11 @@ def main(argv=None):
         print(f"{name:<24}{c:>10}{100 * c / args.draws:>9.3f}")
     print(f"misclassified: {summary['misclassified']}")
     print(f"silent non-finite: {silent}")
+    print(f"verdict differs: {summary['verdict_differs']}")
+    print(
+        "largest difference from the robust path: "
+        f"{summary['max_difference_from_robust_of_peak']:.2e} of the peak"
+    )
     if args.out:
         with open(args.out, "w") as f:
             json.dump(summary, f, indent=2)
@@ -232,6 +266,8 @@ def main(argv=None):
         sum(silent.values())
         + sum(summary["misclassified"].values())
         + summary["on_successful_rate_tests"]["elongation_history_disagreements"]
+        + sum(summary["verdict_differs"].values())
+        + (summary["max_difference_from_robust_of_peak"] > 1e-10)
     )
     return 1 if bad else 0
 
