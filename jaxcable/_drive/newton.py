@@ -378,14 +378,18 @@ def root_scalar(
         )
         return settle(s)
 
-    def fixed_steps(g, args, y0):
-        # `solver.steps_unrolled` Newton steps and no loop: the first of two passes.
-        f = lambda y: g(y, args)
+    def initial(y0) -> _SolveState:
+        # The state before the first Newton step from y0.
         inf = jnp.full_like(y0, jnp.inf)
         no = jnp.zeros_like(y0, dtype=bool)
         zero = jnp.zeros_like(y0, dtype=jnp.int32)
         bracket = Bracket.empty(y0, slope_sign)
-        state = _SolveState(y0, inf, inf, bracket, no, no, 0, zero, zero, y0, inf)
+        return _SolveState(y0, inf, inf, bracket, no, no, 0, zero, zero, y0, inf)
+
+    def fixed_steps(g, args, y0):
+        # `solver.steps_unrolled` Newton steps and no loop: the first of two passes.
+        f = lambda y: g(y, args)
+        state = initial(y0)
         y_eval, aux, aux_t = y0, None, None
         for _ in range(solver.steps_unrolled):
             state, (y_eval, aux, aux_t) = newton(state, f, with_aux=True)
@@ -410,11 +414,8 @@ def root_scalar(
         # fn's arguments are tied to the loop's counter (`loop_tied`), so that what
         # does not depend on y is computed in the iterations taken, not hoisted.
         f = lambda y: g(y, args)
-        inf = jnp.full_like(y0, jnp.inf)
-        no = jnp.zeros_like(y0, dtype=bool)
         zero = jnp.zeros_like(y0, dtype=jnp.int32)
-        bracket = Bracket.empty(y0, slope_sign)
-        state = _SolveState(y0, inf, inf, bracket, no, no, 0, zero, zero, y0, inf)
+        state = initial(y0)
         shape = jax.eval_shape(lambda y: f(y)[1], y0)
         aux = jax.tree_util.tree_map(lambda a: jnp.zeros(a.shape, a.dtype), shape)
         y_eval, aux_t = y0, aux
@@ -432,7 +433,7 @@ def root_scalar(
             lambda s: newton(s, lambda y: g(y, loop_tied(args, s.steps))),
             state,
         )
-        y, bracket = state.y, state.bracket
+        y = state.y
         ok = state.converged & jnp.isfinite(y)
         failed = live & ~ok
         state = eqx.tree_at(
