@@ -31,23 +31,12 @@ from collections.abc import Mapping
 
 import numpy as np
 
+import jaxcable as jc
+from jaxcable._models.fields import field_facts
 
-PARAMETERS = (
-    "E1c",
-    "beta",
-    "gamma",
-    "E1r",
-    "E2c",
-    "t_c",
-    "eta0",
-    "E2r",
-    "t_r1",
-    "E3r",
-    "lambda1",
-    "lambda2",
-    "t_e",
-    "sigma_a",
-)
+
+# The model's declared parameters, in their order.
+PARAMETERS = tuple(field_facts(jc.IntegratedModel))
 # As jaxcable._models.park: the parameters that must be finite and > 0.
 _POSITIVE = (
     "E1c",
@@ -326,8 +315,6 @@ def default_parameters(model=None) -> dict[str, float]:
     """The parameters of a `jaxcable.IntegratedModel` (default: the library's) as a
     dict of floats."""
     if model is None:
-        import jaxcable as jc
-
         model = jc.IntegratedModel()
     return {k: float(getattr(model, k)) for k in PARAMETERS}
 
@@ -361,8 +348,6 @@ def main():
 
     jax.config.update("jax_enable_x64", True)
     import jax.numpy as jnp
-
-    import jaxcable as jc
 
     model = jc.IntegratedModel()
     params = default_parameters(model)

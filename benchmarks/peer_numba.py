@@ -41,6 +41,9 @@ from collections.abc import Mapping
 
 import numpy as np
 
+import jaxcable as jc
+from jaxcable._models.fields import field_facts
+
 
 try:
     import numba
@@ -65,22 +68,14 @@ PARAMETERS = (
     "t_e",
     "sigma_a",
 )
-# Indices of the parameters that must be finite and > 0 (the model's `check`).
+# The model's declared parameters must be the Numba loop's, in its positional order.
+assert PARAMETERS == tuple(field_facts(jc.IntegratedModel)), "IntegratedModel changed"
+# Indices of the parameters that must be finite and > 0: those the model declares
+# positive (its `check`).
 _POSITIVE = tuple(
-    PARAMETERS.index(k)
-    for k in (
-        "E1c",
-        "E1r",
-        "E2c",
-        "t_c",
-        "eta0",
-        "E2r",
-        "t_r1",
-        "E3r",
-        "lambda1",
-        "t_e",
-        "sigma_a",
-    )
+    i
+    for i, (name, facts) in enumerate(field_facts(jc.IntegratedModel).items())
+    if facts.domain == "positive"
 )
 
 # The agreement required of the two in float64: |difference| / peak elongation.
@@ -505,7 +500,6 @@ def simulate_rate_test_numba(
 def problem(samples: int, batch: int):
     """The protocol arrays (one load-unload cycle to 100 N, `samples` samples), the
     cables' lengths (m) and speeds (m/s), and the default parameters (float64)."""
-    import jaxcable as jc
 
     protocol = jc.Protocol.cycles(100.0, 1, samples_per_ramp=samples // 2, start=False)
     arrays = {
@@ -525,8 +519,6 @@ def jaxcable_forward(protocol):
     result), at the library's defaults."""
     import jax
 
-    import jaxcable as jc
-
     def forward(model, cable):
         simulate = lambda c: jc.simulate_rate_test(model, c, protocol, throw=False)
         traj = jax.vmap(simulate)(cable)
@@ -540,8 +532,6 @@ def jaxcable_inputs(params, lengths, speeds):
     the other Cable fields at their defaults."""
     import jax
     import jax.numpy as jnp
-
-    import jaxcable as jc
 
     model = jc.IntegratedModel(**dict(zip(PARAMETERS, params)))
     cable = jc.Cable(length=jnp.asarray(lengths), speed=jnp.asarray(speeds))
@@ -563,8 +553,6 @@ def check_agreement(samples: int, batch: int, parallel: bool | None = None) -> d
     `samples` samples: {"agreement", "successful_jaxcable", "successful_numba"}
     (`parallel`: as `simulate_rate_test_numba`)."""
     import jax
-
-    import jaxcable as jc
 
     if not jax.config.jax_enable_x64:
         raise RuntimeError("check_agreement needs jax_enable_x64.")
