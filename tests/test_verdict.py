@@ -18,6 +18,7 @@ from jaxcable._diagnose import (
     Diagnosis,
     decide,
     explained_pct,
+    explained_rmse_pct,
     rate_of_change,
     residual_structure,
 )
@@ -189,6 +190,7 @@ def _candidate(id, held, gain, significant, share):
     return Candidate(
         id, held, gain, held, -50.0, 0.1, 0.01, "1", "n", significant,
         explained_pct=share, unit="mm",
+        explained_rmse_pct=explained_rmse_pct(1.0, held, 0.05),
     )  # fmt: skip
 
 
@@ -232,7 +234,11 @@ def test_json_and_summary_of_an_unexplained_verdict():
     assert doc["thresholds"]["min_explained_pct"] == MIN_EXPLAINED_PCT
     text = d.summary()
     assert "verdict: unexplained" in text
-    assert "stress_nonlinear_creep, explains 45 %" in text
+    # The share on RMSEs, (1 - 0.74) / (1 - 0.05) = 27 %, the one on squares beside
+    # it, and what is left.
+    assert "stress_nonlinear_creep, explains 27 % of the excess" in text
+    assert "(45 % in squares)" in text
+    assert "leaving 14.8 x the noise" in text
     assert "lag-1 autocorrelation 0.96" in text
     assert "force (r = 0.46)" in text
     # No cause named: the extended model is the fitted base.

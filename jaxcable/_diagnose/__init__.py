@@ -3,14 +3,7 @@ from .diagnose import diagnose as diagnose
 from .discover import DiscoveryResult as DiscoveryResult, discover as discover
 from .heldout import heldout_start as heldout_start
 from .plan import Plan as Plan, covariate_columns as covariate_columns
-from .result import (
-    MAX_DELTA_BIC as MAX_DELTA_BIC,
-    MIN_EXCESS as MIN_EXCESS,
-    MIN_GAIN_PCT as MIN_GAIN_PCT,
-    MIN_SIZE_Z as MIN_SIZE_Z,
-    Candidate as Candidate,
-    Diagnosis as Diagnosis,
-)
+from .result import Candidate as Candidate, Diagnosis as Diagnosis
 from .scoring import (
     Scoring as Scoring,
     heldout_rmse as heldout_rmse,
@@ -27,10 +20,16 @@ from .structure import (
     test_covariates as test_covariates,
 )
 from .verdict import (
+    MAX_DELTA_BIC as MAX_DELTA_BIC,
+    MAX_DIVERGENCE as MAX_DIVERGENCE,
     MAX_FLOOR_RATIO as MAX_FLOOR_RATIO,
     MIN_AUTOCORRELATION as MIN_AUTOCORRELATION,
+    MIN_EXCESS as MIN_EXCESS,
     MIN_EXPLAINED_PCT as MIN_EXPLAINED_PCT,
+    MIN_GAIN_PCT as MIN_GAIN_PCT,
+    MIN_SIZE_Z as MIN_SIZE_Z,
     Verdict as Verdict,
     decide as decide,
     explained_pct as explained_pct,
+    explained_rmse_pct as explained_rmse_pct,
 )

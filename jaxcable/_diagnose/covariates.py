@@ -128,6 +128,7 @@ def covariate_candidates(
                     note,
                     base.against,
                     how,
+                    covariate=column,
                 )
             )
     return tuple(out)

@@ -27,7 +27,9 @@ named stages, each a function with a typed result:
    within `MAX_FLOOR_RATIO` x the noise held out or explain at least
    `MIN_EXPLAINED_PCT` % of the base's excess over it, the one of largest held-out
    gain; else `"unexplained"`, the partial candidates listed with the share of the
-   excess each explains.
+   excess each explains;
+7. the rounds (`rounds.py`): after a cause is named, stages 1-6 again around the
+   extended model, until nothing is left to name.
 """
 
 from collections.abc import Sequence
@@ -35,14 +37,8 @@ from typing import Literal
 
 from .._models import AbstractCableModel, IntegratedModel
 from .._progress import AbstractProgressMeter, NoProgressMeter, check_progress_meter
-from .base import fit_base
-from .catalogue import score_catalogue
-from .covariates import covariate_candidates
-from .discover import discovery_stage
-from .outcome import conclude, verdict
-from .plan import choose_candidates
 from .result import Diagnosis
-from .scoring import noise_floor
+from .rounds import check_max_rounds, diagnose_rounds
 
 
 def diagnose(
@@ -60,6 +56,7 @@ def diagnose(
     progress_meter: AbstractProgressMeter | None = None,
     drive="auto",
     discover: bool | None = None,
+    max_rounds: int = 3,
 ) -> Diagnosis:
     """Find what a model gets wrong on measured data and name the physical cause.
 
@@ -76,6 +73,16 @@ def diagnose(
     `MIN_EXPLAINED_PCT` %; the named cause is the sufficient significant candidate
     of largest held-out gain. Otherwise the verdict, and `named_cause`, is
     `"unexplained"`: every candidate keeps its `explained_pct`.
+
+    **Every cause in turn.** After a cause is named, the diagnosis looks again with
+    the extended model as its base (the named effect's parameters free with the
+    base's), at every candidate not yet named, until the held-out RMSE left is
+    within `MAX_FLOOR_RATIO` x the noise, nothing more is named, or `max_rounds`
+    rounds have run. A round with significant candidates none of which is
+    sufficient takes the best as a partial cause, kept only when the rounds after
+    it explain the rest with it (`jaxcable._diagnose.rounds`). `causes` lists the
+    causes in the order found, `cause_gains` each one's held-out gain over its
+    round's base, `final_heldout_rmse` what is left, `rounds` every round.
 
     **Discovery.** When the verdict would be `"unexplained"` (or `discover=True`),
     [`jaxcable.discover`][] looks for a term the catalogue lacks: a sparse regression
@@ -126,6 +133,8 @@ def diagnose(
         [`jaxcable.ELONGATION_DRIVEN`][]) or its name, or one of these per test.
     - `discover`: look for a discovered term: None (default) when the verdict would
         be `"unexplained"`, True always, False never.
+    - `max_rounds`: the most rounds (causes) to look for, >= 1 (1: stop after the
+        first cause).
 
     **Returns:**
 
@@ -139,40 +148,25 @@ def diagnose(
     """
     if model is None:
         model = IntegratedModel()
+    check_max_rounds(max_rounds)
     meter = check_progress_meter(progress_meter, NoProgressMeter())
+    options = dict(
+        split=split,
+        holdout=holdout,
+        folds=folds,
+        drive=drive,
+        multistart=multistart,
+        max_steps=max_steps,
+        key=key,
+        discover=discover,
+    )
     with meter.bar("diagnosing"):
-        plan = choose_candidates(
+        return diagnose_rounds(
             tests,
             model,
             fit_names=fit_names,
             candidates=candidates,
-            split=split,
-            holdout=holdout,
-            folds=folds,
-            drive=drive,
-        )
-        base = fit_base(
-            plan,
-            model,
-            multistart=multistart,
-            max_steps=max_steps,
-            key=key,
+            max_rounds=max_rounds,
+            options=options,
             progress_meter=meter,
         )
-        found = score_catalogue(plan, model, base, progress_meter=meter)
-        if plan.on_time_split_in_mm:
-            found += covariate_candidates(
-                plan, base, max_steps=max_steps, progress_meter=meter
-            )
-        noise = noise_floor(plan.tests, plan.how)
-        decision = verdict(base, noise, found)
-        discovered = None
-        wanted = decision.verdict == "unexplained" if discover is None else discover
-        if wanted and plan.on_time_split_in_mm:
-            discovered = discovery_stage(
-                plan, base, max_steps=max_steps, progress_meter=meter
-            )
-            if discovered is not None:
-                found += (discovered.candidate,)
-                decision = verdict(base, noise, found)
-        return conclude(plan, model, base, found, decision, noise, discovered)

@@ -12,7 +12,6 @@ covariate, which an elongation-driven test does not prescribe.
 
 import dataclasses
 import math
-import warnings
 from typing import Any
 
 import numpy as np
@@ -20,31 +19,31 @@ import numpy as np
 from .._drive import FORCE_DRIVEN, as_test_drive
 from .._fit import (
     FitResult,
-    IdentifiabilityWarning,
     as_test_list,
     fit,
     model_responses,
     test_id,
 )
 from .._models import AbstractCableModel
-from .._progress import AbstractProgressMeter
-from .base import BaseFit
 from .heldout import heldout_start
 from .library import (
     COVARIATE_TERMS,
     MAX_TERMS,
+    MEMORY_TERMS,
+    RATE_FIELDS,
     TERMS,
     THETA_FIELDS,
     DiscoveredTerm,
     base_fit_names,
     base_start,
     library,
+    memory_equation,
+    memory_library,
+    rate_grid,
     sensitivities,
     theta_unit,
 )
-from .plan import Plan
-from .result import Candidate
-from .scoring import force_scoring, scored_candidate, training_score
+from .scoring import force_scoring
 
 
 # A support is kept only when its held-out RMSE of the residual is this share below
@@ -72,7 +71,10 @@ class DiscoveryResult:
     - `heldout_rmse_mm`: `(base, discovered)` RMSE on the held-out samples, mm.
     - `gain_pct`: 100 (1 - discovered / base) of the held-out RMSE.
     - `path`: `(terms, held-out RMSE of the residual, mm)` of every support the
-        thresholds gave, the empty one first.
+        thresholds gave, the empty one first (a term with memory as `term@rate`).
+    - `rates`: each term's rate k or exponent b (terms with memory), NaN for the
+        stateless ones.
+    - `support`: the chosen support as it appears in `path`.
     """
 
     terms: tuple[str, ...]
@@ -87,6 +89,8 @@ class DiscoveryResult:
     heldout_rmse_mm: tuple[float, float]
     gain_pct: float
     path: tuple[tuple[tuple[str, ...], float], ...]
+    rates: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))
+    support: tuple[str, ...] = ()
 
     def describe(self) -> dict[str, Any]:
         """The term for [`jaxcable.Diagnosis`][]`.discovered`: the equation, terms,
@@ -99,6 +103,7 @@ class DiscoveryResult:
             "values": [float(v) for v in self.values],
             "stderr": [float(s) for s in self.stderr],
             "units": list(self.units),
+            "rates": [float(r) for r in self.rates],
             "heldout_rmse_mm": [float(x) for x in self.heldout_rmse_mm],
             "gain_pct": float(self.gain_pct),
         }
@@ -115,15 +120,24 @@ class DiscoveryResult:
         return values[k], errors[k], self.units[k], f"theta{k} ({self.terms[k]})"
 
 
-def _equation(terms, values, stderr, covariate) -> str:
-    """`d(eps)/dt = v (+-se) unit * symbol + ...` (`0` without terms)."""
+def _equation(terms, values, stderr, covariate, rates) -> str:
+    """`d(eps)/dt = v (+-se) unit * symbol + ...` (`0` without terms), then each
+    term with memory as `eps += ...` with its state's equation."""
     name = covariate or "c"
-    parts = []
-    for t, v, se in zip(terms, values, stderr):
-        symbol = TERMS[t][0].replace("c", name) if t in COVARIATE_TERMS else TERMS[t][0]
+    parts, states = [], []
+    for t, v, se, rate in zip(terms, values, stderr, rates):
         err = f" (+-{se:.2g})" if math.isfinite(se) else ""
-        parts.append(f"{v:.3g}{err} {theta_unit(t, f'[{name}]')} * {symbol}")
-    return "d(eps)/dt = " + (" + ".join(parts) if parts else "0")
+        value = f"{v:.3g}{err} {theta_unit(t, f'[{name}]')}"
+        if t in MEMORY_TERMS:
+            rate_unit = MEMORY_TERMS[t][2].replace("c", f"[{name}]")
+            states.append(
+                "eps += " + memory_equation(t, value, f"{rate:.3g} {rate_unit}", name)
+            )
+            continue
+        symbol = TERMS[t][0].replace("c", name) if t in COVARIATE_TERMS else TERMS[t][0]
+        parts.append(f"{value} * {symbol}")
+    text = "d(eps)/dt = " + (" + ".join(parts) if parts else "0")
+    return "; ".join(states) if states and not parts else "; ".join([text, *states])
 
 
 def discover(
@@ -204,21 +218,45 @@ def discover(
                     f"`tests[{i}]` ({test_id(t, i)}) has no column {covariate!r} "
                     "(the `covariate`)."
                 )
-    names = (
+    wanted = (
         tuple(terms)
         if terms is not None
         else tuple(
-            t for t in TERMS if covariate is not None or t not in COVARIATE_TERMS
+            t
+            for t in (*TERMS, *MEMORY_TERMS)
+            if covariate is not None or t not in COVARIATE_TERMS
         )
     )
-    unknown = [t for t in names if t not in TERMS]
+    unknown = [t for t in wanted if t not in TERMS and t not in MEMORY_TERMS]
     if unknown:
-        raise ValueError(f"`terms` {unknown} are not in the library {list(TERMS)}.")
+        raise ValueError(
+            f"`terms` {unknown} are not in the library {[*TERMS, *MEMORY_TERMS]}."
+        )
+    names = tuple(t for t in wanted if t in TERMS)
+    # Each term with memory enters the regression at every rate of its grid (a
+    # column per rate; a support holds one rate of a term); the joint fit refines it.
+    variation = (
+        float(
+            np.mean(
+                [np.sum(np.abs(np.diff(np.asarray(t.extra[covariate])))) for t in tests]
+            )
+        )
+        if covariate is not None
+        else 1.0
+    )
+    keys = [
+        (t, r) for t in wanted if t in MEMORY_TERMS for r in rate_grid(t, variation)
+    ]
+    labels = names + tuple(f"{t}@{r:.3g}" for t, r in keys)
+    kind = [*names, *(t for t, _ in keys)]
+    rate_of = [math.nan] * len(names) + [r for _, r in keys]
 
     base = base_start(base_fit)
     shared, per = base_fit_names(base_fit)
-    sensitivity = sensitivities(base, base_fit, tests)
-    response = model_responses(base, tests, drive=FORCE_DRIVEN.name)
+    sensitivity = sensitivities(base, base_fit, tests, covariate)
+    response = model_responses(
+        base, tests, drive=FORCE_DRIVEN.name, covariate=covariate
+    )
     rows, train_tests = [], []
     for t, m, h, sens in zip(tests, response, held, sensitivity):
         length = float(t.cable().length)
@@ -228,14 +266,17 @@ def discover(
         valid = own & np.isfinite(measured) & np.isfinite(m)
         r = np.where(valid, (measured - m) / length, 0.0)
         lib = library(t, covariate, names)
-        cum = np.stack([lib[k] for k in names], axis=1)
+        lib_memory = memory_library(t, covariate, m / length, keys)
+        cum = np.stack(
+            [lib[k] for k in names] + [lib_memory[k] for k in keys], axis=1
+        ).reshape(len(m), len(labels))
         rows.append((r, cum, sens / length, valid & ~h, valid & h, length))
         # The training samples of the joint fit: those of its own mask not held out.
         train_tests.append(dataclasses.replace(t, mask=~h & own))
 
     def solve(columns: list[int]) -> tuple[np.ndarray, np.ndarray]:
         """Least squares of the training residual on the chosen terms' strains and
-        every base sensitivity: (theta per term of `names`, base parameter step)."""
+        every base sensitivity: (theta per column of `labels`, base step)."""
         x = np.concatenate(
             [
                 np.concatenate([c[tr][:, columns], s[tr]], 1)
@@ -246,7 +287,7 @@ def discover(
         norms = np.linalg.norm(x, axis=0)
         norms = np.where(norms > 0, norms, 1.0)
         z = np.linalg.lstsq(x / norms, y, rcond=None)[0] / norms
-        theta = np.zeros(len(names))
+        theta = np.zeros(len(labels))
         theta[columns] = z[: len(columns)]
         return theta, z[len(columns) :]
 
@@ -263,16 +304,16 @@ def discover(
     empty = solve([])
     path = {(): (empty[0], score(*empty))}
     support: list[int] = []
-    for _ in range(min(MAX_TERMS, len(names))):
+    for _ in range(min(MAX_TERMS, len(set(kind)))):
         trials = []
-        for k in range(len(names)):
-            if k in support:
+        for k in range(len(labels)):
+            if kind[k] in {kind[j] for j in support}:
                 continue
             theta, step = solve([*support, k])
             trials.append((score(theta, step), k, theta))
         value, k, theta = min(trials, key=lambda v: v[0])
         support.append(k)
-        key = tuple(names[j] for j in sorted(support))
+        key = tuple(labels[j] for j in sorted(support))
         path.setdefault(key, (theta, value))
     empty_score = path[()][1]
     best = min(path, key=lambda s: path[s][1])
@@ -282,12 +323,17 @@ def discover(
         near = [s for s in path if path[s][1] <= 1.01 * path[best][1]]
         best = min(near, key=lambda s: (len(s), path[s][1]))
     coef = path[best][0]
-    chosen = tuple(best)
-    coefficients = np.array([coef[names.index(t)] for t in chosen])
+    index = [labels.index(label) for label in best]
+    chosen = tuple(kind[i] for i in index)
+    coefficients = np.array([coef[i] for i in index])
+    rates = np.array([rate_of[i] for i in index])
     units = tuple(theta_unit(t, f"[{covariate or 'c'}]") for t in chosen)
     report_path = tuple((s, v[1]) for s, v in path.items())
 
     thetas = dict(zip(THETA_FIELDS, coefficients))
+    thetas.update(
+        {RATE_FIELDS[k]: r for k, r in enumerate(rates) if chosen[k] in MEMORY_TERMS}
+    )
     model = DiscoveredTerm(base, terms=chosen, **thetas) if chosen else base
     result, values = None, coefficients
     stderr = np.full(len(chosen), np.nan)
@@ -302,17 +348,19 @@ def discover(
             covariate=covariate,
             **options,
         )
-        index = [result.names.index(n) for n in model.used_fields()]
+        index = [result.names.index(n) for n in THETA_FIELDS[: len(chosen)]]
         values = np.asarray(result.values, float)[index]
         stderr = np.asarray(result.stderr, float)[index]
         model = result.model
-    how = force_scoring(tests)
+        rates = np.array(
+            [
+                float(getattr(model, RATE_FIELDS[k])) if t in MEMORY_TERMS else math.nan
+                for k, t in enumerate(chosen)
+            ]
+        )
+    how = force_scoring(tests, covariate)
     base_rmse = how.rmse(base, tests, range(len(tests)), held)
-    rmse = (
-        how.rmse(model, tests, range(len(tests)), held, covariate)
-        if chosen
-        else base_rmse
-    )
+    rmse = how.rmse(model, tests, range(len(tests)), held) if chosen else base_rmse
     return DiscoveryResult(
         terms=chosen,
         coefficients=coefficients,
@@ -321,7 +369,9 @@ def discover(
         values=values,
         stderr=stderr,
         units=units,
-        equation=_equation(chosen, values, stderr, covariate),
+        equation=_equation(chosen, values, stderr, covariate, rates),
+        rates=rates,
+        support=tuple(best),
         covariate=covariate,
         heldout_rmse_mm=(base_rmse, rmse),
         gain_pct=100.0 * (1.0 - rmse / base_rmse) if base_rmse > 0 else 0.0,
@@ -354,82 +404,3 @@ def term_coefficient(base_fit: FitResult, tests, held, covariate: str, term: str
     )
     value = float(found.coefficients[0]) if found.terms else 0.0
     return value if math.isfinite(value) and value != 0.0 else None
-
-
-@dataclasses.dataclass(frozen=True)
-class Discovered:
-    """The discovery stage of a diagnosis.
-
-    **Fields:**
-
-    - `candidate`: the discovered term scored as a candidate (`"discovered"`).
-    - `description`: the term for [`jaxcable.Diagnosis`][]`.discovered`: the
-        equation, terms, covariate, coefficients with standard errors and units,
-        held-out RMSEs and gain, and every covariate option's held-out residual
-        RMSE (`covariate_scores_mm`).
-    """
-
-    candidate: Candidate
-    description: dict[str, Any]
-
-
-def discovery_stage(
-    plan: Plan, base: BaseFit, *, max_steps: int, progress_meter: AbstractProgressMeter
-) -> Discovered | None:
-    """The best discovered term over no covariate and each recorded one, scored.
-
-    The regression (no joint fit) runs for each covariate option; the option whose
-    chosen support leaves the least held-out residual is fitted jointly with the
-    base ([`jaxcable.discover`][]) and scored like the catalogue's candidates (same
-    held-out samples, BIC, size = its best-determined coefficient). It runs on the
-    time split of force-driven tests.
-
-    **Arguments:**
-
-    - `plan`: the diagnosis's [`Plan`][].
-    - `base`: the base model's [`BaseFit`][] on the training samples.
-    - `max_steps`: Levenberg-Marquardt steps of the joint fit.
-    - `progress_meter`: told of the stage.
-
-    **Returns:**
-
-    A [`Discovered`][], or None when no option found a term or its fit failed.
-    """
-    tests, base_fit = plan.tests, base.fit
-    progress_meter.say("discovering a term")
-    held = [t.mask for t in plan.time_fold.held]
-    scores: dict[str, float] = {}
-    best, best_score = None, math.inf
-    for covariate in [None, *plan.columns]:
-        found = discover(
-            base_fit, tests, covariate=covariate, held=held, joint_fit=False
-        )
-        if not found.terms:
-            continue
-        score = dict(found.path)[found.terms]
-        scores[covariate or "-"] = score
-        if score < best_score:
-            best, best_score = covariate, score
-    if not scores:
-        return None
-    # As for the catalogue's candidates, identifiability is reported in the
-    # candidate's fit, not warned about.
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", IdentifiabilityWarning)
-        found = discover(
-            base_fit,
-            tests,
-            covariate=best,
-            held=held,
-            multistart=1,
-            max_steps=max_steps,
-        )
-    if found.fit is None:
-        return None
-    description = {**found.describe(), "covariate_scores_mm": scores}
-    size = found.size()
-    score = training_score(found.fit, found.heldout_rmse_mm[1])
-    candidate = scored_candidate(
-        "discovered", found.fit, score, size, found.equation, base.against, plan.how
-    )
-    return Discovered(candidate, description)

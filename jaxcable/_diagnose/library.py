@@ -12,12 +12,18 @@ import numpy as np
 
 from .._drive import FORCE_DRIVEN
 from .._fit import FitResult, make_problem, residuals_and_jacobian
-from .._models import AbstractCableModel, discovered
+from .._models import AbstractCableModel, discovered, memory
 
 
 MAX_TERMS = discovered.MAX_TERMS
 TERMS = discovered.TERMS
 THETA_FIELDS = discovered.THETA_FIELDS
+RATE_FIELDS = discovered.RATE_FIELDS
+MEMORY_TERMS = memory.MEMORY_TERMS
+SIGMA_REF = memory.SIGMA_REF
+memory_column = memory.memory_column
+memory_equation = memory.memory_equation
+rate_grid = memory.rate_grid
 DiscoveredTerm = discovered.DiscoveredTerm
 cycle_count = discovered.cycle_count
 term_increments = discovered.term_increments
@@ -25,24 +31,23 @@ theta_unit = discovered.theta_unit
 tension_time_step = discovered.tension_time_step
 
 # The terms that read the covariate (left out of the library without one).
-COVARIATE_TERMS = ("c", "c_rate", "c_abs_rate", "sigma_c", "sigma_c_abs_rate")
+COVARIATE_TERMS = (
+    "c",
+    "c_rate",
+    "c_abs_rate",
+    "sigma_c",
+    "sigma_c_abs_rate",
+    "relax_sigma_c_abs_rate",
+    "relax_c_time",
+)
 
 
-def library(test, covariate: str | None, names=tuple(TERMS)) -> dict[str, np.ndarray]:
-    """Each library term's contribution to the discovered strain per unit theta,
-    eps_k(t) (the cumulative sum of [`term_increments`][] along the test, as
-    `DiscoveredTerm.advance` integrates it), host-side.
-
-    **Arguments:**
-
-    - `test`: a force-driven test (time s, force N, `cable()`).
-    - `covariate`: the extra column read as c, or None (c = 0).
-    - `names`: the terms wanted.
-
-    **Returns:**
-
-    `{term: eps_k per sample}` (1/theta_k units: s x unit of phi).
-    """
+def step_inputs(test, covariate: str | None) -> dict[str, np.ndarray]:
+    """The start (0) and end (1) values of every step of a force-driven test, as
+    `DiscoveredTerm.advance` sees them: stress (Pa), covariate (its unit; 0 without
+    one), dt (s), time under load and rest time so far (s), cycles so far (-), and
+    the step's time under load (s). The first sample is applied from the unloaded
+    cable at time[0] (dt = 0)."""
     time = np.asarray(test.time, float)
     force = np.asarray(test.force, float)
     c = np.zeros_like(time)
@@ -50,7 +55,6 @@ def library(test, covariate: str | None, names=tuple(TERMS)) -> dict[str, np.nda
         c = np.asarray(test.extra[covariate], float)
     cable = test.cable()
     area = float(cable.area)
-    # The first sample is applied from the unloaded cable at time[0] (dt = 0).
     force0 = np.r_[0.0, force[:-1]]
     c0 = np.r_[c[0], c[:-1]]
     dt = np.r_[0.0, np.diff(time)]
@@ -70,20 +74,92 @@ def library(test, covariate: str | None, names=tuple(TERMS)) -> dict[str, np.nda
     def before(x):
         return np.r_[0.0, x[:-1]]
 
+    return {
+        "sigma0": force0 / area,
+        "sigma1": force / area,
+        "c0": c0,
+        "c1": c,
+        "dt": dt,
+        "loaded0": before(loaded),
+        "loaded1": loaded,
+        "rest0": before(rest),
+        "rest1": rest,
+        "cycles0": before(cycles),
+        "cycles1": cycles,
+        "dt_loaded": dt_loaded,
+    }
+
+
+def library(test, covariate: str | None, names=tuple(TERMS)) -> dict[str, np.ndarray]:
+    """Each library term's contribution to the discovered strain per unit theta,
+    eps_k(t) (the cumulative sum of [`term_increments`][] along the test, as
+    `DiscoveredTerm.advance` integrates it), host-side.
+
+    **Arguments:**
+
+    - `test`: a force-driven test (time s, force N, `cable()`).
+    - `covariate`: the extra column read as c, or None (c = 0).
+    - `names`: the terms wanted.
+
+    **Returns:**
+
+    `{term: eps_k per sample}` (1/theta_k units: s x unit of phi).
+    """
+    x = step_inputs(test, covariate)
     increments = term_increments(
-        force0 / area,
-        force / area,
-        c0,
-        c,
-        dt,
-        before(loaded),
-        loaded,
-        before(rest),
-        rest,
-        before(cycles),
-        cycles,
+        *(x[k] for k in ("sigma0", "sigma1", "c0", "c1", "dt", "loaded0")),
+        *(x[k] for k in ("loaded1", "rest0", "rest1", "cycles0", "cycles1")),
     )
     return {k: np.cumsum(np.asarray(increments[k], float)) for k in names}
+
+
+def memory_library(
+    test, covariate: str | None, base_strain: np.ndarray, keys
+) -> dict[str, np.ndarray]:
+    """Each term with memory's strain per unit theta along a test, at a fixed rate
+    (to first order in a damage: `memory_column`), host-side: the recurrences of
+    `memory_step` in NumPy.
+
+    **Arguments:**
+
+    - `test`, `covariate`: as in [`library`][].
+    - `base_strain`: the base model's strain at every sample (a damage scales it).
+    - `keys`: `(term, rate)` pairs ([`MEMORY_TERMS`][] ids).
+
+    **Returns:**
+
+    `{(term, rate): column per sample}`.
+    """
+    x = step_inputs(test, covariate)
+    out = {}
+    for term, rate in keys:
+        _, _, _, kind, target, driver = MEMORY_TERMS[term]
+        step = {
+            "t": x["dt"],
+            "t_load": x["dt_loaded"],
+            "|dc|": np.abs(x["c1"] - x["c0"]),
+            "N": x["cycles1"] - x["cycles0"],
+        }[driver]
+        if kind == "damage":
+            load = 0.5 * (
+                (np.maximum(x["sigma0"], 0.0) / SIGMA_REF) ** rate
+                + (np.maximum(x["sigma1"], 0.0) / SIGMA_REF) ** rate
+            )
+            q = np.cumsum(load * step)
+        else:
+            start = x["c1"][0] if target == "c" else 0.0
+            goal = 0.5 * (
+                x["sigma0"] + x["sigma1"] if target == "sigma" else x["c0"] + x["c1"]
+            )
+            decay = np.exp(-rate * step)
+            q = np.empty_like(goal)
+            value = start
+            for i in range(goal.size):
+                value = goal[i] + (value - goal[i]) * decay[i]
+                q[i] = value
+            q = q - start
+        out[(term, rate)] = np.asarray(memory_column(term, q, base_strain), float)
+    return out
 
 
 def base_start(base_fit: FitResult) -> AbstractCableModel:
@@ -102,10 +178,13 @@ def base_fit_names(base_fit: FitResult) -> tuple[list[str], list[str]]:
     return [n for n in names if n not in per], per
 
 
-def sensitivities(base, base_fit: FitResult, tests) -> list[np.ndarray]:
+def sensitivities(
+    base, base_fit: FitResult, tests, covariate: str | None = None
+) -> list[np.ndarray]:
     """d(model elongation)/du of the base's fitted parameters at its fit (u: the
     fit's unconstrained parameters, log for the positive ones), m, one
-    `(samples, p)` array per test, every sample."""
+    `(samples, p)` array per test, every sample; the base driven by the column
+    `covariate` (or none)."""
     names = list(dict.fromkeys(n.split("[")[0] for n in base_fit.names))
     full = [
         dataclasses.replace(
@@ -113,7 +192,9 @@ def sensitivities(base, base_fit: FitResult, tests) -> list[np.ndarray]:
         )
         for t in tests
     ]
-    problem, u = make_problem(base, full, names, None, None, FORCE_DRIVEN.name)
+    problem, u = make_problem(
+        base, full, names, None, None, FORCE_DRIVEN.name, covariate
+    )
     _, jacobian = residuals_and_jacobian(problem, u, "fwd")
     jacobian = np.asarray(jacobian).reshape(len(full), -1, u.shape[0])
     return [jacobian[i, : len(t.time)] for i, t in enumerate(full)]

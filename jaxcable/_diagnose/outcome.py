@@ -7,10 +7,11 @@ from collections.abc import Sequence
 from .._fit import test_id
 from .._models import AbstractCableModel
 from .base import BaseFit
-from .discover import Discovered
+from .diverging import departure
 from .plan import Plan
 from .result import Candidate, Diagnosis
-from .verdict import Verdict, decide
+from .stage import Discovered
+from .verdict import Verdict, decide, diverges, explained_rmse_pct
 
 
 def verdict(base: BaseFit, noise: float, candidates: Sequence[Candidate]) -> Verdict:
@@ -26,20 +27,31 @@ def verdict(base: BaseFit, noise: float, candidates: Sequence[Candidate]) -> Ver
 
 def conclude(
     plan: Plan,
-    model: AbstractCableModel,
+    model: AbstractCableModel | str,
     base: BaseFit,
     candidates: Sequence[Candidate],
     decision: Verdict,
     noise: float,
     discovered: Discovered | None,
 ) -> Diagnosis:
-    """The [`jaxcable.Diagnosis`][] of the stages: each candidate with its share of
-    the excess, the named cause (or `"none"` / `"unexplained"`) and its effect."""
+    """The [`jaxcable.Diagnosis`][] of one round's stages: each candidate with its
+    shares of the excess (on squares and on RMSEs) and, when it diverges, where;
+    the named cause (or `"none"` / `"unexplained"`) and its effect. `model`: the
+    base model, or its name."""
+    held = base.score.heldout_rmse
     out = tuple(
-        dataclasses.replace(c, explained_pct=share)
+        dataclasses.replace(
+            c,
+            explained_pct=share,
+            explained_rmse_pct=explained_rmse_pct(held, c.heldout_rmse, noise),
+            diverging=(
+                departure(plan, base, c)
+                if c.applicable and diverges(held, c.heldout_rmse)
+                else ""
+            ),
+        )
         for c, share in zip(candidates, decision.explained_pct)
     )
-    held = base.score.heldout_rmse
     if decision.named is not None:
         best = out[decision.named]
         named, extended, gain = best.id, best.heldout_rmse, best.gain_pct
@@ -53,7 +65,7 @@ def conclude(
         named = "unexplained" if decision.verdict == "unexplained" else "none"
         extended, gain, effect = held, 0.0, {}
     return Diagnosis(
-        base_model=type(model).__name__,
+        base_model=model if isinstance(model, str) else type(model).__name__,
         named_cause=named,
         base_heldout_rmse=held,
         base_train_rmse=base.score.train_rmse,
@@ -72,4 +84,5 @@ def conclude(
         scales=tuple(float(x) for x in plan.how.scales),
         verdict=decision.verdict,
         discovered={} if discovered is None else discovered.description,
+        covariate=plan.how.covariate,
     )

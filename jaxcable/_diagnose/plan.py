@@ -106,10 +106,13 @@ def choose_candidates(
     holdout: float,
     folds: int | None,
     drive,
+    covariate: str | None = None,
 ) -> Plan:
     """Check the arguments of [`jaxcable.diagnose`][] (same names), resolve the
     drives once on the whole tests, split them, and choose the candidates the data
-    can show and the base can carry (`applicability`, then `wrap`).
+    can show and the base can carry (`applicability`, then `wrap`). `covariate`: the
+    extra column the base reads (a covariate's extension named in an earlier round),
+    then the only column of the covariates' candidates and of the discovery.
 
     **Returns:**
 
@@ -124,6 +127,9 @@ def choose_candidates(
     k = len(tests) if folds is None else folds
     _check_arguments(tests, model, ids, split, holdout, k)
     columns = tuple(covariate_columns(tests))
+    if covariate is not None:
+        # `Cable.covariate` is one column: the one the base already reads.
+        columns = (covariate,)
     tests = [
         t
         if getattr(t, "mask", None) is not None
@@ -134,7 +140,7 @@ def choose_candidates(
     if names is None:  # not in the registry: every parameter
         names = tuple(declared_parameters(model))
     # The drives and residual units, once for the whole tests: no fold re-detects.
-    how = scoring(tests, drive)
+    how = scoring(tests, drive, covariate)
     parts = splits(tests, split, holdout, k)
     catalogue = tuple(i for i in ids if i in EXTENSIONS)
     reasons = {}

@@ -11,19 +11,17 @@ from .._drive import AbstractTestDrive, as_test_drive
 from .._files import write_text_atomic
 from .._fit import FitResult
 from .._json import jsonable
+from .text import summary
 from .verdict import (
+    MAX_DELTA_BIC,
+    MAX_DIVERGENCE,
     MAX_FLOOR_RATIO,
     MIN_AUTOCORRELATION,
     MIN_EXCESS,
     MIN_EXPLAINED_PCT,
+    MIN_GAIN_PCT,
+    MIN_SIZE_Z,
 )
-
-
-# Significance thresholds of a candidate (see `jaxcable.diagnose`).
-MIN_GAIN_PCT = 5.0
-MAX_DELTA_BIC = -10.0
-MIN_SIZE_Z = 3.0
-# MIN_EXCESS, MAX_FLOOR_RATIO and MIN_EXPLAINED_PCT (the verdict): see `verdict.py`.
 
 
 class _InMm:
@@ -65,6 +63,12 @@ class Candidate:
     - `explained_pct`: the share of the base's held-out excess over the noise floor
         this candidate explains, %: 100 (base^2 - candidate^2) / (base^2 -
         floor^2) of the held-out RMSEs (NaN when not applicable or no excess).
+    - `explained_rmse_pct`: the same share on the RMSEs themselves, %: 100 (base -
+        candidate) / (base - floor); the residual left is what the summary shows
+        beside it.
+    - `covariate`: the extra column the candidate reads, or None.
+    - `diverging`: "" or why the candidate is not ranked: its held-out RMSE is more
+        than `MAX_DIVERGENCE` x the base's (which test, from when it departs).
     - `heldout_rmse_mm`, `train_rmse_mm` (properties): the RMSEs in mm; NaN unless
         `unit` is mm.
     """
@@ -84,6 +88,9 @@ class Candidate:
     fit: FitResult | None = dataclasses.field(default=None, repr=False, compare=False)
     unit: str = "mm"
     explained_pct: float = math.nan
+    explained_rmse_pct: float = math.nan
+    covariate: str | None = None
+    diverging: str = ""
 
     heldout_rmse_mm = _InMm("heldout_rmse")
     train_rmse_mm = _InMm("train_rmse")
@@ -164,8 +171,27 @@ class Diagnosis:
         base's excess over it), `"none"` (the base is within `MIN_EXCESS` x the
         noise: nothing to explain) or `"unexplained"` (an excess no candidate
         explains enough; the partial ones keep their `explained_pct`).
+    - `causes`: every cause named, in the order found (round 1's is
+        `named_cause`): after a cause is named the diagnosis looks again with the
+        extended model as its base, until what is left is within
+        `MAX_FLOOR_RATIO` x the noise, nothing more is significant, or the rounds
+        run out. Empty when the verdict is `"none"` or `"unexplained"`.
+    - `cause_gains`: each cause's held-out gain over its round's base, %.
+    - `final_heldout_rmse`: the held-out RMSE of the model with every cause of
+        `causes` (the base's when there is none), in `unit`.
+    - `rounds`: each round's own `Diagnosis` (its base, candidates and decision;
+        the first is this one's), including a round whose cause was tried and not
+        kept (`accepted` False).
+    - `accepted`: for a round: whether what it named belongs to `causes` (a
+        partial cause is kept only when the causes after it, together, explain
+        the excess; an early cause is dropped when the later ones make it
+        redundant: see [`jaxcable.diagnose`][]).
+    - `note`: for a round whose cause was not kept: why.
+    - `covariate`: the extra column the base reads (a covariate's extension named
+        in an earlier round), or None.
     - `base_heldout_rmse_mm`, `base_train_rmse_mm`, `extended_heldout_rmse_mm`,
-        `noise_mm` (properties): the same in mm; NaN unless `unit` is mm.
+        `final_heldout_rmse_mm`, `noise_mm` (properties): the same in mm; NaN
+        unless `unit` is mm.
     """
 
     base_model: str
@@ -187,15 +213,29 @@ class Diagnosis:
     scales: tuple[float, ...] = ()
     verdict: str = "none"
     discovered: dict[str, Any] = dataclasses.field(default_factory=dict)
+    causes: tuple[str, ...] = ()
+    cause_gains: tuple[float, ...] = ()
+    final_heldout_rmse: float = math.nan
+    rounds: tuple["Diagnosis", ...] = dataclasses.field(default=(), repr=False)
+    accepted: bool = True
+    note: str = ""
+    covariate: str | None = None
+    final_fit: FitResult | None = dataclasses.field(
+        default=None, repr=False, compare=False
+    )
 
     base_heldout_rmse_mm = _InMm("base_heldout_rmse")
+    final_heldout_rmse_mm = _InMm("final_heldout_rmse")
     base_train_rmse_mm = _InMm("base_train_rmse")
     extended_heldout_rmse_mm = _InMm("extended_heldout_rmse")
     noise_mm = _InMm("noise")
 
     def extended_fit(self) -> FitResult:
-        """The fit of the extended model the diagnosis names (the named candidate's
-        fit on the training data), or the base's when no cause is named."""
+        """The fit of the extended model the diagnosis names, with every cause of
+        `causes` (the last round's named candidate's fit on the training data), or
+        the base's when no cause is named."""
+        if self.final_fit is not None:
+            return self.final_fit
         if self.verdict == "named" and self.named_cause not in ("none", "unexplained"):
             fit = self.candidate(self.named_cause).fit
             if fit is not None:
@@ -237,11 +277,35 @@ class Diagnosis:
                 "max_heldout_over_noise": MAX_FLOOR_RATIO,
                 "min_explained_pct": MIN_EXPLAINED_PCT,
                 "min_autocorrelation_unexplained": MIN_AUTOCORRELATION,
+                "max_divergence": MAX_DIVERGENCE,
             },
+            "causes": list(self.causes),
+            "cause_gains_pct": [jsonable(g) for g in self.cause_gains],
+            "final_heldout_rmse": jsonable(self.final_heldout_rmse),
+            "final_heldout_rmse_mm": jsonable(self.final_heldout_rmse_mm),
+            "rounds": [r.round_dict() for r in self.rounds],
             "candidates": [c.to_dict() for c in self.candidates],
             "discovered": jsonable(self.discovered),
             "structure": jsonable(self.structure),
             "tests": list(self.test_ids),
+        }
+
+    def round_dict(self) -> dict[str, Any]:
+        """One round for the JSON: its base, decision and candidates."""
+        return {
+            "base_model": self.base_model,
+            "base_heldout_rmse": jsonable(self.base_heldout_rmse),
+            "named_cause": self.named_cause,
+            "verdict": self.verdict,
+            "accepted": self.accepted,
+            "note": self.note,
+            "covariate": self.covariate,
+            "extended_heldout_rmse": jsonable(self.extended_heldout_rmse),
+            "gain_pct": jsonable(self.gain_pct),
+            "effect": {k: jsonable(v) for k, v in self.effect.items()},
+            "noise": jsonable(self.noise),
+            "discovered": jsonable(self.discovered),
+            "candidates": [c.to_dict() for c in self.candidates],
         }
 
     def to_json(self, path=None) -> str:
@@ -252,132 +316,6 @@ class Diagnosis:
         return text
 
     def summary(self) -> str:
-        """A plain-text table: base, every candidate, the named cause."""
-        u = self.unit
-        w = max(12, len(u) + 10)  # the held-out column: 12 wide in mm, as ever
-        lines = [
-            f"jaxcable diagnose: base {self.base_model}, {len(self.test_ids)} test(s), "
-            f"held out: {self.split}",
-        ]
-        if u != "mm":
-            lines.append(_scored_line(self.drives, u))
-        noise = f"{self.noise * 1e3:.3g} um" if u == "mm" else f"{self.noise:.3g} {u}"
-        lines += [
-            f"noise (estimated from the data) {noise}; base "
-            f"RMSE {self.base_train_rmse:.4g} {u} fitted, "
-            f"{self.base_heldout_rmse:.4g} {u} held out",
-            "",
-            f"{'candidate':<24}{'held-out ' + u:>{w}}{'gain %':>9}{'expl %':>8}"
-            f"{'dBIC':>10}"
-            f"{'size':>12}{'+-':>10}  unit",
-        ]
-        for c in self.candidates:
-            if not c.applicable:
-                lines.append(f"{c.id:<24}{'n/a':>{w}}  {c.note}")
-                continue
-            mark = " *" if c.significant else ""
-            lines.append(
-                f"{c.id:<24}{c.heldout_rmse:>{w}.4g}{c.gain_pct:>9.1f}"
-                f"{c.explained_pct:>8.0f}"
-                f"{c.delta_bic:>10.1f}{c.size:>12.4g}{c.size_stderr:>10.2g}  "
-                f"{c.size_unit}{mark}"
-            )
-        lines.append("")
-        if self.discovered:
-            d = self.discovered
-            covariate = f" (covariate {d['covariate']})" if d.get("covariate") else ""
-            lines += [f"discovered term{covariate}: {d['equation']}", ""]
-        lines += self._verdict_lines()
-        return "\n".join(lines)
-
-    def _verdict_lines(self) -> list[str]:
-        """The summary's last lines: the verdict, said plainly, and the structure."""
-        u = self.unit
-        structure = self.structure
-        strongest = structure.get("strongest")
-        r_lag = structure.get("autocorrelation", math.nan)
-        strong = (
-            f"{strongest} (r = {structure['correlation'][strongest]:.2f})"
-            if strongest
-            else "none"
-        )
-        if self.verdict == "unexplained":
-            shown = [c for c in self.candidates if math.isfinite(c.explained_pct)]
-            partial = [c for c in shown if c.significant] or shown
-            if partial:
-                best = max(partial, key=lambda c: c.explained_pct)
-                what = (
-                    f"the best candidate, {best.id}, explains "
-                    f"{best.explained_pct:.0f} % of the excess over the noise"
-                    + ("" if best.significant else " (not significant)")
-                )
-            else:
-                what = "no candidate could be fitted"
-            lines = [
-                f"verdict: unexplained — {what}; the residual stays systematic "
-                f"(lag-1 autocorrelation {r_lag:.2f}); strongest structure: {strong}",
-            ]
-            others = [c for c in partial if c is not best and c.significant]
-            if others:
-                lines.append(
-                    "other partial candidates: "
-                    + ", ".join(f"{c.id} {c.explained_pct:.0f} %" for c in others)
-                )
-            lines.append(
-                f"(a cause is named when it comes within {MAX_FLOOR_RATIO:g} x the "
-                f"noise held out or explains >= {MIN_EXPLAINED_PCT:g} % of the "
-                "excess)"
-            )
-            return lines
-        if self.named_cause == "none" and (
-            not self.base_heldout_rmse > MIN_EXCESS * self.noise
-        ):
-            against = (
-                f"{self.base_heldout_rmse * 1e3:.3g} um against "
-                f"{self.noise * 1e3:.3g} um"
-                if u == "mm"
-                else f"{self.base_heldout_rmse:.3g} {u} against {self.noise:.3g} {u}"
-            )
-            lines = [
-                f"verdict: none — the base predicts the held-out data to within "
-                f"{MIN_EXCESS:g} x the noise ({against}): nothing to explain"
-            ]
-        elif self.named_cause == "none":
-            lines = [
-                "verdict: none — no candidate improves the held-out RMSE "
-                f"significantly: gain >= {MIN_GAIN_PCT:g} %, dBIC <= "
-                f"{MAX_DELTA_BIC:g}, size >= {MIN_SIZE_Z:g} standard errors; and "
-                f"the residual left is not systematic (lag-1 autocorrelation "
-                f"{r_lag:.2f} < {MIN_AUTOCORRELATION:g})"
-            ]
-        else:
-            e = self.effect
-            named = self.candidate(self.named_cause)
-            lines = [
-                f"named cause: {self.named_cause}: {e['parameter']} = "
-                f"{e['value']:.4g} +- {e['stderr']:.2g} {e['unit']}; held-out RMSE "
-                f"{self.base_heldout_rmse:.4g} -> "
-                f"{self.extended_heldout_rmse:.4g} {u} ({self.gain_pct:.1f} % gain)",
-                f"verdict: named — it explains {named.explained_pct:.0f} % of the "
-                "excess over the noise; held-out RMSE "
-                f"{self.extended_heldout_rmse / self.noise:.2f} x the noise",
-            ]
-        if strongest:
-            lines.append(
-                f"base residuals relate most to: {strong}; lag-1 "
-                f"autocorrelation {r_lag:.2f} (white "
-                f"noise: |r| < {structure['white_noise_band']:.2g})"
-            )
-        return lines
-
-
-def _scored_line(drives: tuple, unit: str) -> str:
-    """What a diagnosis not in mm scores: one line for the summary."""
-    if unit == "N":
-        return "scored: the force, N (every test driven by its elongation)"
-    by_force = sum(not as_test_drive(d).scores_force for d in drives)
-    return (
-        f"scored: {by_force} force-driven test(s) by their elongation, "
-        f"{len(drives) - by_force} elongation-driven by their force; residuals in "
-        "noise units (each divided by the noise of its test's scored channel)"
-    )
+        """A plain-text table per round: base, every candidate, what was named, and
+        what is left."""
+        return summary(self)

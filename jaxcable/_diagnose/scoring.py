@@ -141,6 +141,9 @@ class Scoring(NamedTuple):
     - `unit`: the reported unit: `"mm"`, `"N"` or `"noise"`.
     - `factor`: reported unit per residual unit (1e3 for mm, else 1).
     - `controls`: each test's [`jaxcable.ControlDetection`][] (the reason).
+    - `covariate`: the extra column every model of the diagnosis is driven by
+        (`Cable.covariate`), None when its base reads none: after a round names a
+        covariate's extension, every later model carries it.
     """
 
     drives: tuple[AbstractTestDrive, ...]
@@ -148,6 +151,7 @@ class Scoring(NamedTuple):
     unit: str
     factor: float
     controls: tuple[ControlDetection, ...]
+    covariate: str | None = None
 
     @property
     def drive_names(self) -> list[str]:
@@ -156,13 +160,14 @@ class Scoring(NamedTuple):
 
     def residuals(self, result, tests, index, covariate=None) -> list[np.ndarray]:
         """Model minus measured value of `tests` (the tests `index` of the diagnosis,
-        any masks) in residual units, every sample."""
+        any masks) in residual units, every sample; driven by `covariate` (default
+        the diagnosis's)."""
         return scored_residuals(
             result,
             tests,
             [self.drives[i] for i in index],
             [float(self.scales[i]) for i in index],
-            covariate=covariate,
+            covariate=covariate or self.covariate,
         )
 
     def rmse(self, result, tests, index, held=None, covariate=None) -> float:
@@ -181,9 +186,10 @@ class Scoring(NamedTuple):
         return pooled_rmse(residual, masks, self.factor)
 
 
-def scoring(tests, drive="auto") -> Scoring:
+def scoring(tests, drive="auto", covariate: str | None = None) -> Scoring:
     """The [`Scoring`][] of a diagnosis of `tests` under `drive` (`"auto"`, a drive
-    name or value, or one per test; see [`jaxcable.fit`][]).
+    name or value, or one per test; see [`jaxcable.fit`][]), its models driven by the
+    extra column `covariate` (or none).
 
     **Raises:**
 
@@ -198,14 +204,15 @@ def scoring(tests, drive="auto") -> Scoring:
     # in the diagnosis's unit.
     padded = pad_tests(tests, drive=[d.name for d in drives])
     unit, factor = _REPORTED[padded.units[0]]
-    return Scoring(drives, np.asarray(padded.scale, float), unit, factor, controls)
+    scale = np.asarray(padded.scale, float)
+    return Scoring(drives, scale, unit, factor, controls, covariate)
 
 
-def force_scoring(tests) -> Scoring:
+def force_scoring(tests, covariate: str | None = None) -> Scoring:
     """The [`Scoring`][] of force-driven `tests` in mm (residual unit m), as the
     discovery and the covariates' candidates score, without detecting drives."""
     n = len(tests)
-    return Scoring((FORCE_DRIVEN,) * n, np.ones(n), "mm", 1e3, ())
+    return Scoring((FORCE_DRIVEN,) * n, np.ones(n), "mm", 1e3, (), covariate)
 
 
 def pooled_rmse(residuals, masks, factor: float = 1.0) -> float:
@@ -381,6 +388,7 @@ def scored_candidate(
     note: str,
     base: BaseScore,
     how: Scoring,
+    covariate: str | None = None,
 ) -> Candidate:
     """A fitted candidate scored: held-out gain over the base, ΔBIC on the training
     samples, z of its size, and whether it is significant on all three counts.
@@ -395,6 +403,7 @@ def scored_candidate(
     - `note`: what to show beside it (an equation, the covariate; "" for none).
     - `base`: the base's [`BaseScore`][].
     - `how`: the diagnosis's [`Scoring`][].
+    - `covariate`: the extra column the candidate reads (default the diagnosis's).
 
     **Returns:**
 
@@ -426,6 +435,7 @@ def scored_candidate(
         note,
         result,
         how.unit,
+        covariate=covariate or how.covariate,
     )
 
 

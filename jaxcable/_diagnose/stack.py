@@ -160,6 +160,7 @@ def stack_fitter(stack: Stack, how, base_model, **options):
                     active,
                     throw=False,
                     drive=drives,
+                    covariate=how.covariate,
                     multistart=multistart,
                     **options,
                 )

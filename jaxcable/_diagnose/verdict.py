@@ -51,6 +51,11 @@ from collections.abc import Sequence
 from typing import NamedTuple
 
 
+# Significance thresholds of a candidate (see `jaxcable.diagnose`): its held-out gain
+# over the base, %; ΔBIC on the training samples; |size| / standard error.
+MIN_GAIN_PCT = 5.0
+MAX_DELTA_BIC = -10.0
+MIN_SIZE_Z = 3.0
 # Nothing is named while the base already predicts the held-out data to within 20 % of
 # the noise level estimated from the data: what is left is noise, and a candidate that
 # "explains" it is fitting the noise's realisation (measured: a 10 J/mol activation
@@ -60,6 +65,11 @@ MIN_EXCESS = 1.2
 MAX_FLOOR_RATIO = 2.0
 # ... or when it explains at least S % of the base's excess over the floor.
 MIN_EXPLAINED_PCT = 95.0
+# A candidate whose held-out RMSE is more than this multiple of the base's diverges:
+# its fit compensates something else on the training samples and runs away where it
+# extrapolates (a drift rate fitted on hours of load carried over a 72 h rest). Its
+# share of the excess is no measure of anything; it is flagged, not ranked.
+MAX_DIVERGENCE = 2.0
 # With no significant candidate, an excess is "unexplained" only when systematic: a
 # smooth error s on white noise sigma has lag-1 autocorrelation s^2 / (s^2 + sigma^2),
 # 0.5 where s = sigma (a base at sqrt(2) x the noise).
@@ -104,6 +114,37 @@ def explained_pct(base: float, candidate: float, floor: float) -> float:
     if excess <= 0.0:
         return math.nan
     return 100.0 * (base * base - candidate * candidate) / excess
+
+
+def explained_rmse_pct(base: float, candidate: float, floor: float) -> float:
+    """The share of the base's held-out excess over the noise floor a candidate
+    explains, measured on the RMSEs themselves, %: 100 (base - candidate) / (base -
+    floor). Unlike [`explained_pct`][] (on squares) it does not call a residual of
+    10 x the noise 99 % explained when the base was at 100 x.
+
+    **Arguments:**
+
+    - `base`, `candidate`, `floor`: held-out RMSEs of the base and the candidate,
+        and the noise floor, in one unit.
+
+    **Returns:**
+
+    The share, %; NaN when an input is not finite or the base is not above the
+    floor.
+    """
+    if not all(math.isfinite(x) for x in (base, candidate, floor)):
+        return math.nan
+    if base <= floor:
+        return math.nan
+    return 100.0 * (base - candidate) / (base - floor)
+
+
+def diverges(base: float, candidate: float) -> bool:
+    """Whether a candidate's held-out RMSE is more than `MAX_DIVERGENCE` x the
+    base's (or not finite while the base's is)."""
+    if not math.isfinite(base):
+        return False
+    return not (math.isfinite(candidate) and candidate <= MAX_DIVERGENCE * base)
 
 
 def sufficient(base: float, candidate: float, floor: float) -> bool:

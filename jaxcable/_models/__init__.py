@@ -42,6 +42,7 @@ from .extensions import (
     discovered as discovered,
     log_shift_arrhenius as log_shift_arrhenius,
     log_shift_wlf as log_shift_wlf,
+    memory as memory,
 )
 from .fields import (
     parameter as parameter,

@@ -8,11 +8,11 @@ import pathlib
 
 import numpy as np
 
-from .._diagnose import MIN_GAIN_PCT, Diagnosis, heldout_start, scored_residuals
-from .._drive import FORCE_DRIVEN
+from .._diagnose import MIN_GAIN_PCT, Diagnosis, heldout_start
 from .._files import write_text_atomic
 from .._fit import as_test_list
 from .plots import panels, residual_axes, save_png, time_axis
+from .rounds_plot import cause_fits, plot_rounds, residuals
 
 
 # The files of the diagnosis report, in the order `write_diagnosis_report` returns
@@ -23,42 +23,25 @@ DIAGNOSIS_REPORT_FILES = (
     "residuals.png",
     "candidates.png",
     "structure.png",
+    "rounds.png",
 )
-
-
-def _residuals(result, diagnosis: Diagnosis, tests: list) -> list[np.ndarray]:
-    """Model minus measured value of every test's scored channel, in the diagnosis's
-    unit (mm of elongation, N of force, or noise units)."""
-    drives = diagnosis.drives or (FORCE_DRIVEN,) * len(tests)
-    scales = diagnosis.scales or (1.0,) * len(tests)
-    factor = 1e3 if diagnosis.unit == "mm" else 1.0
-    return [factor * r for r in scored_residuals(result, tests, drives, scales)]
 
 
 def _plot_residuals(path, diagnosis: Diagnosis, tests: list) -> None:
     """Model minus measured value of each test's scored channel (elongation or force)
-    vs time, base and the named extension, one panel per test, the held-out part
-    shaded (PNG)."""
-    base = _residuals(diagnosis.base_fit, diagnosis, tests)
-    named = (
-        # Only a named cause has a fit to show: not "none" nor "unexplained".
-        diagnosis.candidate(diagnosis.named_cause)
-        if diagnosis.verdict == "named"
-        else None
-    )
-    extended = _residuals(named.fit, diagnosis, tests) if named is not None else None
+    vs time: the base, then after each cause kept (in the order found), one panel
+    per test, the held-out part shaded (PNG)."""
+    base = residuals(diagnosis.base_fit, diagnosis, tests)
+    after = [
+        (c.id, residuals(c.fit, diagnosis, tests, c.covariate or r.covariate))
+        for r, c in cause_fits(diagnosis)
+    ]
     fig, axes = panels(len(tests), 3.8, 2.7, 0.8)
     for i, (ax, t) in enumerate(zip(axes, tests)):
         x, label, log = time_axis(np.asarray(t.time, float))
         ax.plot(x, base[i], color="0.5", lw=0.8, label="base")
-        if extended is not None:
-            ax.plot(
-                x,
-                extended[i],
-                color="tab:blue",
-                lw=0.8,
-                label=f"+ {diagnosis.named_cause}",
-            )
+        for k, (name, values) in enumerate(after):
+            ax.plot(x, values[i], color=f"C{k}", lw=0.8, label=f"+ {name}")
         if diagnosis.holdout is not None:
             cut = heldout_start(len(t.time), diagnosis.holdout)
             if cut < len(t.time):
@@ -67,8 +50,8 @@ def _plot_residuals(path, diagnosis: Diagnosis, tests: list) -> None:
         if i == 0:
             ax.legend(fontsize=8)
     fig.suptitle(
-        f"Residuals before/after (held-out part shaded): named cause "
-        f"{diagnosis.named_cause}"
+        "Residuals before/after (held-out part shaded): "
+        + (", ".join(diagnosis.causes) or diagnosis.named_cause)
     )
     save_png(fig, path)
 
@@ -80,9 +63,18 @@ def _plot_candidates(path, diagnosis: Diagnosis) -> None:
     fig = Figure(figsize=(7, 3.6), layout="constrained")
     ax = fig.subplots()
     shown = [c for c in diagnosis.candidates if c.applicable]
-    gains = [c.gain_pct if math.isfinite(c.gain_pct) else 0.0 for c in shown]
-    colours = ["tab:blue" if c.id == diagnosis.named_cause else "0.6" for c in shown]
-    ax.barh([c.id for c in shown], gains, color=colours)
+    # A diverging candidate is drawn at -100 %, hatched: its gain measures nothing.
+    gains = [
+        -100.0 if c.diverging else c.gain_pct if math.isfinite(c.gain_pct) else 0.0
+        for c in shown
+    ]
+    colours = ["tab:blue" if c.id in diagnosis.causes else "0.6" for c in shown]
+    bars = ax.barh([c.id for c in shown], gains, color=colours)
+    for bar, c in zip(bars, shown):
+        if c.diverging:
+            bar.set_hatch("//")
+            bar.set_facecolor("white")
+            bar.set_edgecolor("tab:red")
     ax.axvline(MIN_GAIN_PCT, color="tab:red", lw=0.8, ls="--", label="threshold")
     ax.set_xlabel("held-out RMSE gain over the base [%]")
     ax.set_title(
@@ -124,18 +116,24 @@ def _candidate_table(diagnosis: Diagnosis) -> list[str]:
     """Every candidate's scores as the lines of a markdown table."""
     table = [
         f"| candidate | held-out RMSE {diagnosis.unit} | gain % | ΔBIC | size | ± | "
-        "unit | significant | explained % of the excess |",
-        "| --- | ---: | ---: | ---: | ---: | ---: | --- | --- | ---: |",
+        "unit | significant | explained % of the excess (RMSE) | (squares) |",
+        "| --- | ---: | ---: | ---: | ---: | ---: | --- | --- | ---: | ---: |",
     ]
     for c in diagnosis.candidates:
         if not c.applicable:
-            table.append(f"| {c.id} | n/a | | | | | | {c.note} | |")
+            table.append(f"| {c.id} | n/a | | | | | | {c.note} | | |")
+            continue
+        if c.diverging:
+            table.append(
+                f"| {c.id} | {c.heldout_rmse:.4g} | | | | | | diverges: "
+                f"{c.diverging} | | |"
+            )
             continue
         table.append(
             f"| {c.id} | {c.heldout_rmse:.4g} | {c.gain_pct:.1f} | "
             f"{c.delta_bic:.1f} | {c.size:.4g} | {c.size_stderr:.2g} | "
             f"{c.size_unit} | {'yes' if c.significant else 'no'} | "
-            f"{c.explained_pct:.0f} |"
+            f"{c.explained_rmse_pct:.0f} | {c.explained_pct:.0f} |"
         )
     return table
 
@@ -147,8 +145,9 @@ def write_diagnosis_report(out, diagnosis: Diagnosis, tests) -> list[pathlib.Pat
     `residuals.png` (model minus measured value of each test's scored channel vs
     time, in the diagnosis's unit, base and the named extension, before/after,
     held-out part shaded), `candidates.png` (held-out gain
-    of every candidate against the threshold) and `structure.png` (correlation of the
-    base residuals with each test condition).
+    of every candidate against the threshold), `structure.png` (correlation of the
+    base residuals with each test condition) and `rounds.png` (the held-out RMSE
+    round by round; a discovered term beside the residual it removes).
 
     **Arguments:**
 
@@ -163,12 +162,13 @@ def write_diagnosis_report(out, diagnosis: Diagnosis, tests) -> list[pathlib.Pat
     out = pathlib.Path(out)
     out.mkdir(parents=True, exist_ok=True)
     whole = [dataclasses.replace(t, mask=None) for t in as_test_list(tests)]
-    json_path, summary, residuals_png, candidates_png, structure_png = (
+    json_path, summary, residuals_png, candidates_png, structure_png, rounds_png = (
         out / name for name in DIAGNOSIS_REPORT_FILES
     )
     _plot_residuals(residuals_png, diagnosis, whole)
     _plot_candidates(candidates_png, diagnosis)
     _plot_structure(structure_png, diagnosis)
+    plot_rounds(rounds_png, diagnosis, whole)
 
     diagnosis.to_json(json_path)
     write_text_atomic(
@@ -178,6 +178,13 @@ def write_diagnosis_report(out, diagnosis: Diagnosis, tests) -> list[pathlib.Pat
         + "\n```\n\n"
         + "\n".join(_candidate_table(diagnosis))
         + "\n\n![residuals](residuals.png)\n![candidates](candidates.png)\n"
-        + "![structure](structure.png)\n",
+        + "![structure](structure.png)\n![rounds](rounds.png)\n",
     )
-    return [json_path, summary, residuals_png, candidates_png, structure_png]
+    return [
+        json_path,
+        summary,
+        residuals_png,
+        candidates_png,
+        structure_png,
+        rounds_png,
+    ]

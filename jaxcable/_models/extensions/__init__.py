@@ -20,6 +20,7 @@ sign would jump with every noise blip.
 """
 
 from ..base import AbstractExtension
+from . import memory as memory
 from .apparatus import (
     BeddingIn as BeddingIn,
     BeddingInState as BeddingInState,

@@ -20,8 +20,9 @@ from ..base import (
     covariate_of,
     state_zero,
 )
-from ..fields import signed_effect
+from ..fields import parameter, signed_effect
 from ..kernels import running_max, tension_time_step
+from .memory import MEMORY_TERMS, memory_step, memory_strain
 
 
 # Each term of the library: its symbol in an equation and its unit ("c" stands for
@@ -46,11 +47,15 @@ TERMS: dict[str, tuple[str, str]] = {
 # The most terms one DiscoveredTerm carries (its fields theta0..theta3).
 MAX_TERMS = 4
 THETA_FIELDS = tuple(f"theta{k}" for k in range(MAX_TERMS))
+RATE_FIELDS = tuple(f"rate{k}" for k in range(MAX_TERMS))
 
 
 def theta_unit(term: str, covariate_unit: str = "c") -> str:
     """The unit of the coefficient of `term`: 1/s per unit of phi (the covariate's
-    unit written `covariate_unit`)."""
+    unit written `covariate_unit`); for a term with memory its own
+    (`MEMORY_TERMS`)."""
+    if term in MEMORY_TERMS:
+        return MEMORY_TERMS[term][1].replace("c", covariate_unit)
     unit = TERMS[term][1]
     per_second = unit.endswith("/s")
     unit = unit.removesuffix("/s")
@@ -123,7 +128,11 @@ class DiscoveredTermState(eqx.Module):
     - `variation`: total variation of the force so far, N.
     - `loaded`: time under load so far, s (the base's continuous tension clock).
     - `rest`: time not under load so far, s.
-    - `strain`: the discovered strain eps_d.
+    - `strain`: the discovered strain eps_d of the stateless terms.
+    - `c_start`: the covariate at the first sample (a lagging covariate strain is
+        measured from it), its unit.
+    - `memory`: the state of each term with memory (a relaxing variable q, or a
+        damage's integral I), one slot per term.
     """
 
     base: PyTree
@@ -135,6 +144,16 @@ class DiscoveredTermState(eqx.Module):
     loaded: Float[Array, ""]
     rest: Float[Array, ""]
     strain: Float[Array, ""]
+    c_start: Float[Array, ""]
+    memory: Float[Array, " 4"]
+
+
+def _rate():
+    """The nonlinear parameter of a term with memory: its relaxation rate k per unit
+    of its driver, or its damage exponent b (positive; unused by stateless terms)."""
+    return parameter(
+        1.0, unit="1/unit of the driver (k), or - (b)", note="a rate or exponent"
+    )
 
 
 class DiscoveredTerm(AbstractExtension[DiscoveredTermState]):
@@ -191,6 +210,10 @@ class DiscoveredTerm(AbstractExtension[DiscoveredTermState]):
     theta1: Float[Array, ""] = _theta()
     theta2: Float[Array, ""] = _theta()
     theta3: Float[Array, ""] = _theta()
+    rate0: Float[Array, ""] = _rate()
+    rate1: Float[Array, ""] = _rate()
+    rate2: Float[Array, ""] = _rate()
+    rate3: Float[Array, ""] = _rate()
     terms: tuple[str, ...] = eqx.field(static=True, default=())
 
     def check_more(self):
@@ -200,21 +223,26 @@ class DiscoveredTerm(AbstractExtension[DiscoveredTermState]):
                 f"DiscoveredTerm `terms` must be a tuple of at most {MAX_TERMS} term "
                 f"ids, got {terms!r}."
             )
-        unknown = [t for t in terms if t not in TERMS]
+        unknown = [t for t in terms if t not in TERMS and t not in MEMORY_TERMS]
         if unknown or len(set(terms)) != len(terms):
             raise ValueError(
                 f"DiscoveredTerm `terms` {terms!r}: each must be one of "
-                f"{list(TERMS)}, without repeats."
+                f"{[*TERMS, *MEMORY_TERMS]}, without repeats."
             )
 
     def used_fields(self) -> tuple[str, ...]:
-        """The theta fields of the terms in use, `theta0`, ... (the ones to fit)."""
-        return THETA_FIELDS[: len(self.terms)]
+        """The fields of the terms in use (the ones to fit): `theta0`, ... and the
+        `rate` of each term with memory."""
+        rates = [RATE_FIELDS[k] for k, t in enumerate(self.terms) if t in MEMORY_TERMS]
+        return THETA_FIELDS[: len(self.terms)] + tuple(rates)
 
     def init(self, cable: Cable) -> DiscoveredTermState:
         zero = state_zero(cable, *(getattr(self, n) for n in THETA_FIELDS))
         return DiscoveredTermState(
-            self.base.init(cable), jnp.array(False), *([zero] * 7)
+            self.base.init(cable),
+            jnp.array(False),
+            *([zero] * 8),
+            jnp.zeros(MAX_TERMS, zero.dtype),
         )
 
     def advance(
@@ -248,11 +276,39 @@ class DiscoveredTerm(AbstractExtension[DiscoveredTermState]):
             cycle_count(state.variation, state.force_max),
             cycle_count(variation, force_max),
         )
-        rate = sum(
-            (getattr(self, THETA_FIELDS[k]) * increments[t])
-            for k, t in enumerate(self.terms)
+        stateless = [(k, t) for k, t in enumerate(self.terms) if t in TERMS]
+        strain = state.strain + sum(
+            (getattr(self, THETA_FIELDS[k]) * increments[t] for k, t in stateless),
+            start=jnp.zeros_like(state.strain),
         )
-        strain = state.strain + rate
+        c_start = jnp.where(state.started, state.c_start, covariate)
+        memory, added = state.memory, strain
+        base_strain = parts.total
+        for k, t in enumerate(self.terms):
+            if t not in MEMORY_TERMS:
+                continue
+            rate = getattr(self, RATE_FIELDS[k])
+            # A relaxing covariate starts at the first sample's covariate.
+            q0 = jnp.where(state.started, memory[k], c_start)
+            q0 = q0 if t == "relax_c_time" else memory[k]
+            q1 = memory_step(
+                t,
+                rate,
+                q0,
+                state.force / area,
+                force / area,
+                c0,
+                covariate,
+                dt,
+                dt_loaded,
+                cycle_count(state.variation, state.force_max),
+                cycle_count(variation, force_max),
+            )
+            memory = memory.at[k].set(q1)
+            q = q1 - c_start if t == "relax_c_time" else q1
+            added = added + memory_strain(
+                t, getattr(self, THETA_FIELDS[k]), q, base_strain
+            )
         new = DiscoveredTermState(
             base_state,
             jnp.array(True),
@@ -263,5 +319,7 @@ class DiscoveredTerm(AbstractExtension[DiscoveredTermState]):
             loaded,
             rest,
             strain,
+            c_start,
+            memory,
         )
-        return new, add_parts(parts, creep=strain)
+        return new, add_parts(parts, creep=added)

@@ -1,0 +1,286 @@
+"""Every cause in turn: the rounds of [`jaxcable.diagnose`][].
+
+A round is one pass of the stages (plan, base fit, catalogue, covariates' forms,
+discovery, verdict) around a base model. After a round names a cause, the next round
+takes the extended model as its base (the named effect's parameters free with the
+base's, from their fitted values) and looks again, at every candidate not yet named.
+The rounds stop when what is left is within `MAX_FLOOR_RATIO` x the noise held out,
+when a round names nothing, or after `max_rounds`.
+
+A round that names nothing but has significant candidates (each explains part of the
+excess, none enough: two effects of similar size, say) takes its best one as a
+*partial* cause and goes on. The partial cause is kept only when the rounds after it
+name their causes and, together with it, explain what its round's base left:
+within `MAX_FLOOR_RATIO` x the noise, or `MIN_EXPLAINED_PCT` % of that excess in
+squares ([`sufficient`][]). Otherwise it is reported as tried (`accepted` False) and
+the verdict stays what the rounds before it gave.
+"""
+
+import dataclasses
+from collections.abc import Sequence
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from .._models import COVARIATE_EXTENSIONS, EXTENSIONS, AbstractCableModel
+from .._progress import AbstractProgressMeter
+from .base import fit_base
+from .catalogue import score_catalogue
+from .covariates import covariate_candidates
+from .outcome import conclude, verdict
+from .plan import Plan, choose_candidates
+from .prune import Pruned, prune
+from .result import Candidate, Diagnosis
+from .scoring import noise_floor
+from .stage import discovery_stage
+from .verdict import MAX_FLOOR_RATIO, sufficient
+
+
+@dataclasses.dataclass(frozen=True)
+class RoundBase:
+    """The base of one round.
+
+    **Fields:**
+
+    - `model`: the base model, with its start values (the previous round's fit).
+    - `label`: its name in the summary, e.g. `IntegratedModel + sensor_drift`.
+    - `names`: its parameters to fit (None: the registry's identifiable set).
+    - `covariate`: the extra column it reads, or None.
+    - `exclude`: the candidate ids not tried any more (named before).
+    """
+
+    model: AbstractCableModel
+    label: str
+    names: tuple[str, ...] | None
+    covariate: str | None
+    exclude: frozenset[str]
+
+
+def one_round(
+    tests, base: RoundBase, candidates, options: dict, meter
+) -> tuple[Diagnosis, Plan]:
+    """One pass of the stages around `base` (see `jaxcable._diagnose.diagnose`): its
+    diagnosis and plan."""
+    ids = [*EXTENSIONS, *COVARIATE_EXTENSIONS] if candidates is None else candidates
+    ids = [i for i in ids if i not in base.exclude]
+    plan = choose_candidates(
+        tests,
+        base.model,
+        fit_names=base.names,
+        candidates=ids,
+        split=options["split"],
+        holdout=options["holdout"],
+        folds=options["folds"],
+        drive=options["drive"],
+        covariate=base.covariate,
+    )
+    max_steps = options["max_steps"]
+    fitted = fit_base(
+        plan,
+        base.model,
+        multistart=options["multistart"],
+        max_steps=max_steps,
+        key=options["key"],
+        progress_meter=meter,
+    )
+    found = score_catalogue(plan, base.model, fitted, progress_meter=meter)
+    if plan.on_time_split_in_mm:
+        found += covariate_candidates(
+            plan, fitted, max_steps=max_steps, progress_meter=meter
+        )
+    noise = noise_floor(plan.tests, plan.how)
+    decision = verdict(fitted, noise, found)
+    discovered = None
+    wanted = (
+        decision.verdict == "unexplained"
+        if options["discover"] is None
+        else options["discover"]
+    )
+    if wanted and plan.on_time_split_in_mm:
+        discovered = discovery_stage(
+            plan, fitted, max_steps=max_steps, progress_meter=meter
+        )
+        if discovered is not None:
+            found += (discovered.candidate,)
+            decision = verdict(fitted, noise, found)
+    return conclude(plan, base.label, fitted, found, decision, noise, discovered), plan
+
+
+def partial_cause(d: Diagnosis) -> Candidate | None:
+    """The significant candidate of largest held-out gain of a round that named
+    nothing though its base is above the noise, or None."""
+    if d.verdict != "unexplained":
+        return None
+    able = [
+        c
+        for c in d.candidates
+        if c.significant and c.fit is not None and not c.diverging
+    ]
+    return max(able, key=lambda c: c.gain_pct, default=None)
+
+
+def next_base(base: RoundBase, cause: Candidate) -> RoundBase:
+    """The base of the next round: the model of `cause`'s fit (per-test values
+    averaged), its fitted parameters free."""
+    fit = cause.fit
+    model = jax.tree_util.tree_map(
+        lambda x: jnp.mean(x) if eqx.is_inexact_array(x) and x.ndim else x,
+        fit.model,
+    )
+    names = tuple(dict.fromkeys(n.split("[")[0] for n in fit.names))
+    covariate = cause.covariate or base.covariate
+    # A covariate's candidate is tried once per form: `mechano_sorptive[h]` named,
+    # `mechano_sorptive` is not tried again.
+    return RoundBase(
+        model=model,
+        label=f"{base.label} + {cause.id}",
+        names=names,
+        covariate=covariate,
+        exclude=base.exclude | {cause.id, cause.id.split("[")[0]},
+    )
+
+
+def diagnose_rounds(
+    tests,
+    model: AbstractCableModel,
+    *,
+    fit_names: Sequence[str] | None,
+    candidates: Sequence[str] | None,
+    max_rounds: int,
+    options: dict,
+    progress_meter: AbstractProgressMeter,
+) -> Diagnosis:
+    """Round after round until nothing is left to name (see the module's
+    description); the first round's [`jaxcable.Diagnosis`][] with the causes,
+    their gains, the final held-out RMSE and every round."""
+    base = RoundBase(
+        model,
+        type(model).__name__,
+        None if fit_names is None else tuple(fit_names),
+        None,
+        frozenset(),
+    )
+    rounds: list[Diagnosis] = []
+    plans: list[Plan] = []
+    kept = 0  # the rounds whose causes are kept
+    pending = None  # the round of a partial cause not yet confirmed
+    for k in range(max_rounds):
+        if k:
+            progress_meter.say(f"round {k + 1}: base {base.label}")
+        d, plan = one_round(tests, base, candidates, options, progress_meter)
+        plans.append(plan)
+        cause = d.candidate(d.named_cause) if d.verdict == "named" else None
+        partial = None
+        if cause is None and pending is None and k + 1 < max_rounds:
+            partial = partial_cause(d)
+        if cause is None and partial is None:
+            rounds.append(d)
+            break
+        cause = cause or partial
+        d = _with_cause(d, cause)
+        rounds.append(d)
+        if partial is not None:
+            pending = k
+        elif pending is not None:
+            start = rounds[pending]
+            if sufficient(start.base_heldout_rmse, cause.heldout_rmse, start.noise):
+                pending, kept = None, k + 1
+        else:
+            kept = k + 1
+        if cause.heldout_rmse <= MAX_FLOOR_RATIO * d.noise:
+            break
+        base = next_base(base, cause)
+    rounds = [
+        r
+        if i < kept or r.verdict != "named"
+        else dataclasses.replace(
+            r,
+            accepted=False,
+            note="a partial cause, tried as the base of the next round and not "
+            "kept: the causes after it did not explain the rest",
+        )
+        for i, r in enumerate(rounds)
+    ]
+    pruned = None
+    if kept:
+        last = rounds[kept - 1]
+        cause = last.candidate(last.named_cause)
+        plan = plans[kept - 1]
+        plan = dataclasses.replace(
+            plan, how=plan.how._replace(covariate=cause.covariate or plan.how.covariate)
+        )
+        if kept > 1:
+            progress_meter.say("trying each earlier cause out of the final model")
+        pruned = prune(plan, cause.fit, cause.heldout_rmse, kept, options)
+        for i, note in enumerate(pruned.notes):
+            if note:
+                rounds[i] = dataclasses.replace(rounds[i], accepted=False, note=note)
+    return _combined(rounds, kept, pruned)
+
+
+def _with_cause(d: Diagnosis, cause: Candidate) -> Diagnosis:
+    """Round `d` naming `cause` (a partial one is named in its round)."""
+    return dataclasses.replace(
+        d,
+        verdict="named",
+        named_cause=cause.id,
+        extended_heldout_rmse=cause.heldout_rmse,
+        gain_pct=cause.gain_pct,
+        effect={
+            "parameter": cause.size_name,
+            "value": cause.size,
+            "stderr": cause.size_stderr,
+            "unit": cause.size_unit,
+        },
+    )
+
+
+def _combined(rounds: list[Diagnosis], kept: int, pruned: Pruned | None) -> Diagnosis:
+    """The first round's diagnosis with the causes of the first `kept` rounds that
+    the pruning kept, and every round."""
+    first = rounds[0]
+    causes = [r for r in rounds[:kept] if r.accepted]
+    top = first
+    if causes and causes[0] is not first:
+        # The first round's cause was not kept: the first kept one is "the" cause.
+        lead = causes[0]
+        top = dataclasses.replace(
+            first,
+            verdict="named",
+            named_cause=lead.named_cause,
+            extended_heldout_rmse=lead.extended_heldout_rmse,
+            gain_pct=lead.gain_pct,
+            effect=lead.effect,
+            accepted=True,
+            note="",
+        )
+    elif not causes and first.verdict == "named":
+        # The first round's cause was partial and not confirmed: as without rounds.
+        top = dataclasses.replace(
+            first,
+            verdict="unexplained",
+            named_cause="unexplained",
+            extended_heldout_rmse=first.base_heldout_rmse,
+            gain_pct=0.0,
+            effect={},
+        )
+    return dataclasses.replace(
+        top,
+        causes=tuple(r.named_cause for r in causes),
+        cause_gains=tuple(r.gain_pct for r in causes),
+        final_heldout_rmse=(pruned.heldout_rmse if causes else first.base_heldout_rmse),
+        final_fit=pruned.fit if causes else None,
+        rounds=tuple(rounds) if len(rounds) > 1 else (),
+    )
+
+
+def check_max_rounds(max_rounds) -> int:
+    """`max_rounds` checked: an int >= 1."""
+    if (
+        isinstance(max_rounds, bool)
+        or not isinstance(max_rounds, int)
+        or max_rounds < 1
+    ):
+        raise ValueError(f"`max_rounds` must be an int >= 1, got {max_rounds!r}.")
+    return max_rounds
