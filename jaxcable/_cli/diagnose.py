@@ -105,8 +105,8 @@ def diagnose_command(args) -> int:
         with write_errors("--out", args.out):
             diagnosis.extended_fit().to_json(args.out)
         what = (
-            f"the base with the named cause {diagnosis.named_cause}"
-            if diagnosis.verdict == "named"
+            f"the base with the named cause(s) {', '.join(diagnosis.causes)}"
+            if diagnosis.causes
             else f"the fitted base model: no cause named (verdict {diagnosis.verdict})"
         )
         print(f"wrote {args.out}: {what}", file=log)
