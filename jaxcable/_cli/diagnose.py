@@ -93,6 +93,7 @@ def diagnose_command(args) -> int:
         max_steps=args.max_steps,
         key=jax.random.key(args.seed),
         drive=[d.control for d in drives],
+        max_rounds=args.max_rounds,
     )
     if args.json:
         print(diagnosis.to_json())

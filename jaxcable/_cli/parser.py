@@ -398,8 +398,8 @@ def _diagnose(commands) -> None:
     diag.add_argument(
         "--json",
         action="store_true",
-        help="print one JSON object on stdout (named_cause, verdict, candidates "
-        "with explained_pct, structure, unit, "
+        help="print one JSON object on stdout (named_cause, causes, rounds, "
+        "verdict, candidates with explained_pct, structure, unit, "
         "base_heldout_rmse, extended_heldout_rmse, ... in unit: mm, N or noise; "
         "the *_mm fields in mm when every test is force-driven); the log goes to "
         "stderr",
@@ -407,15 +407,15 @@ def _diagnose(commands) -> None:
     diag.add_argument(
         "--out",
         metavar="EXTENDED.json",
-        help="write the extended model the diagnosis names (the base with the named "
-        "cause), fitted, as a PARAMS.json for 'jaxcable simulate --params', "
+        help="write the extended model the diagnosis names (the base with every "
+        "named cause), fitted, as a PARAMS.json for 'jaxcable simulate --params', "
         "'jaxcable fit --params' and the controller; the fitted base model when no "
         "cause is named",
     )
     how = _add_report_data_and_fit(
         diag,
         "write diagnosis.json, summary.md and plots before/after "
-        "(residuals.png, candidates.png, structure.png) to this folder",
+        "(residuals.png, candidates.png, structure.png, rounds.png) to this folder",
         "how to diagnose",
         "base parameters",
         "",
@@ -449,6 +449,14 @@ def _diagnose(commands) -> None:
         metavar="X",
         help="held-out fraction of every test's samples for --split time "
         "(default: 0.3)",
+    )
+    how.add_argument(
+        "--max-rounds",
+        type=_positive_int,
+        default=3,
+        metavar="N",
+        help="look for at most N causes, one per round, each round with the causes "
+        "named before in the model (default: 3; 1 stops after the first cause)",
     )
     _add_drive_option(diag, "of each test (fixed for every fold and candidate)")
     _add_solver_options(diag, starts=1)
