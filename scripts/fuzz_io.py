@@ -28,7 +28,9 @@ the one of the suite's fuzz test.
 import argparse
 import dataclasses
 import json
+import os
 import pathlib
+import re
 import sys
 import tempfile
 import time
@@ -418,11 +420,360 @@ def check(case: Case, path: pathlib.Path, read_test) -> tuple[str, float, str]:
     return "ok", seconds, ""
 
 
+# ----------------------------------------------------------------------------------
+# Mutations of the real exports of `tests/data/exports/`: columns reordered, added,
+# renamed; units moved between the header and a units row; blank and comment lines
+# between header and data; other encodings and line ends.
+
+KN, LBF, IN = 1e3, 4.4482216152605, 0.0254
+# file, separator, header line, units line (None: units in the names), first data
+# line, (column, factor to SI, unit as written) of time, force, elongation, length_mm.
+CORPUS = [
+    *(
+        (
+            f"TensileDataAnalysis/Specimen_RawData_{k}.csv",
+            ",",
+            5,
+            6,
+            7,
+            ((0, 1.0, "s"), (2, LBF, "lbf"), (1, IN, "in")),
+            50.0,
+        )
+        for k in range(1, 6)
+    ),
+    (
+        "bluer/vero_clear_ccyclic_Specimen_RawData_6.csv",
+        ",",
+        4,
+        5,
+        6,
+        ((0, 1.0, "sec"), (2, 1.0, "N"), (1, 1e-3, "mm")),
+        20.0,
+    ),
+    (
+        "instron_data_processing/silicone_30a_Test1.steps.tracking.csv",
+        ",",
+        1,
+        None,
+        2,
+        ((0, 1.0, "s"), (8, KN, "kN"), (7, 1e-3, "mm")),
+        30.0,
+    ),
+    (
+        "instron_data_processing/silicone_10a_Test7.steps.tracking.csv",
+        ",",
+        1,
+        None,
+        2,
+        ((0, 1.0, "s"), (8, KN, "kN"), (7, 1e-3, "mm")),
+        30.0,
+    ),
+    (
+        "instron_data_processing/silicone_30a_20251029_145648_1.csv",
+        ",",
+        1,
+        2,
+        3,
+        ((1, 1.0, "s"), (3, KN, "kN"), (2, 1e-3, "mm")),
+        30.0,
+    ),
+    (
+        "tensile_test_analyzer/Exemple_Shimadzu_Tract_L100_D2.csv",
+        ",",
+        2,
+        3,
+        4,
+        ((0, 1.0, "sec"), (1, 1.0, "N"), (2, 1e-3, "mm")),
+        100.0,
+    ),
+    (
+        "tensile_test_analyzer/Exemple_WB100kN_Tract_L100_D2.csv",
+        ";",
+        1,
+        None,
+        2,
+        ((1, 1.0, "s"), (2, KN, "kN"), (9, 1e-3, "mm")),
+        100.0,
+    ),
+    (
+        "tensile_test_analyzer/Exemple_WB100kN_2_Tract_L100_D2.csv",
+        ";",
+        1,
+        None,
+        2,
+        ((1, 1.0, "s"), (2, KN, "kN"), (4, 1e-3, "mm")),
+        100.0,
+    ),
+    (
+        "tensile_test_analyzer/Exemple_WB100kN_Mod_Young.csv",
+        ";",
+        1,
+        None,
+        2,
+        ((1, 1.0, "s"), (2, KN, "kN"), (9, 1e-3, "mm")),
+        100.0,
+    ),
+]
+SYNONYMS = (
+    ("Time", "Test time", "Zeit", "Temps", "Prüfzeit"),
+    ("Load", "Force", "Standard force", "Kraft"),
+    ("Extension", "Crosshead", "Displacement", "Stroke", "Standardweg"),
+)
+ADDED = (
+    ("Tensile stress", "MPa"),
+    ("Tenacity", "N/tex"),
+    ("PIP count", ""),
+    ("Strain gauge", "V"),
+    ("Humidity", "%"),
+    ("Cycle count", ""),
+    ("Remark", ""),
+)
+CORPUS_MUTATIONS = (
+    "reorder",
+    "add-column",
+    "rename",
+    "units-to-names",
+    "units-row",
+    "blank-lines",
+    "comment-lines",
+    "encoding",
+    "line-ends",
+)
+
+
+@dataclasses.dataclass
+class Export:
+    """A corpus file split into preamble lines, header, units and data cells."""
+
+    name: str
+    sep: str
+    preamble: list[str]
+    header: list[str]
+    units: list[str] | None
+    rows: list[list[str]]
+    quoted: bool
+    spec: tuple
+    length_mm: float
+
+
+def load_corpus(root: pathlib.Path) -> list[Export]:
+    import csv
+
+    out = []
+    for name, sep, header, units, first, spec, length_mm in CORPUS:
+        text = (root / name).read_bytes().decode("utf-8-sig")
+        lines = re.split(r"\r\n|\r|\n", text)
+        while lines and not lines[-1]:
+            lines.pop()
+
+        def cells(line):
+            return next(csv.reader([line], delimiter=sep))
+
+        rows = [cells(line) for line in lines[first - 1 :] if line.strip()]
+        head = cells(lines[header - 1])
+        unit_cells = None if units is None else cells(lines[units - 1])
+        width = max(len(head), *(len(r) for r in rows))
+        # Trailing columns that are empty everywhere (a trailing separator) go.
+        while width and not head[width - 1 :] and all(len(r) < width for r in rows):
+            width -= 1
+        while width and all(
+            (len(r) < width or not r[width - 1]) for r in [head, *rows]
+        ):
+            width -= 1
+
+        def fit(r):
+            return (r + [""] * width)[:width]
+
+        out.append(
+            Export(
+                name,
+                sep,
+                lines[: header - 1],
+                fit(head),
+                None if unit_cells is None else fit(unit_cells),
+                [fit(r) for r in rows],
+                '"' in lines[first - 1],
+                spec,
+                length_mm,
+            )
+        )
+    return out
+
+
+def make_corpus_case(rng, corpus: list[Export]) -> Case:
+    """A mutated corpus file and the values it holds (read without slack
+    detection, with its length)."""
+    export = rng.choice(corpus)
+    what = [export.name.split("/")[-1]]
+    kinds = rng.sample(CORPUS_MUTATIONS, rng.randint(1, 4))
+    width = len(export.header)
+    header, units = (
+        list(export.header),
+        (None if export.units is None else list(export.units)),
+    )
+    keep = rng.randint(20, min(len(export.rows), 300))
+    rows = [list(r) for r in export.rows[:keep]]
+    known = [column for column, _, _ in export.spec]
+    expected = [np.array([float(r[c]) for r in rows]) * f for c, f, _ in export.spec]
+    if "rename" in kinds:
+        k = rng.randrange(3)
+        column, _, unit = export.spec[k]
+        new = rng.choice(SYNONYMS[k])
+        header[column] = new if units is not None else f"{new} ({unit})"
+        what.append(f"rename {export.header[column]!r}->{header[column]!r}")
+    if "units-to-names" in kinds and units is not None:
+        header = [
+            f"{h} {u}" if u.startswith("(") else (f"{h} ({u})" if u else h)
+            for h, u in zip(header, units)
+        ]
+        units = None
+        what.append("units-to-names")
+    elif "units-row" in kinds and units is None:
+        units = [""] * width
+        for column, _, unit in export.spec:
+            units[column] = f"({unit})"
+        what.append("units-row")
+    if "add-column" in kinds:
+        name, unit = rng.choice(ADDED)
+        at = rng.randint(0, width)
+        if units is not None:
+            units.insert(at, f"({unit})" if unit else "")
+            header.insert(at, name)
+        else:
+            header.insert(at, f"{name} ({unit})" if unit else name)
+        for r in rows:
+            r.insert(at, f"{rng.uniform(-5, 5):.4f}")
+        known = [c + (c >= at) for c in known]
+        width += 1
+        what.append(f"add {name!r} at {at}")
+    if "reorder" in kinds:
+        order = list(range(width))
+        rng.shuffle(order)
+        header = [header[i] for i in order]
+        units = None if units is None else [units[i] for i in order]
+        rows = [[r[i] for i in order] for r in rows]
+        what.append("reorder")
+
+    def join(cells):
+        if export.quoted:
+            return export.sep.join(f'"{c}"' for c in cells)
+        return export.sep.join(cells)
+
+    lines = [*export.preamble, join(header)]
+    gaps = []
+    if "blank-lines" in kinds:
+        gaps.append([""] * rng.randint(1, 3))
+    if "comment-lines" in kinds:
+        gaps.append(["# " + rng.choice(("note", "re-zeroed", "x,y", "1,2,3"))])
+    if units is not None:
+        if gaps and rng.random() < 0.5:
+            lines += gaps.pop(0)
+        lines.append(join(units))
+    for gap in gaps:
+        lines += gap
+    what += [k for k in kinds if k in ("blank-lines", "comment-lines")]
+    first = len(lines) + 1
+    lines += [join(r) for r in rows]
+    end = "\n"
+    if "line-ends" in kinds:
+        end = rng.choice(("\r\n", "\r"))
+        what.append(f"line ends {end!r}")
+    encoding = "utf-8"
+    if "encoding" in kinds:
+        encoding = rng.choice(("utf-8-sig", "cp1252", "latin-1"))
+        what.append(encoding)
+    text = end.join(lines) + end
+    try:
+        raw = text.encode(encoding)
+    except UnicodeEncodeError:
+        raw = text.encode("utf-8")
+    return Case(
+        text=raw,
+        kwargs={"length_mm": export.length_mm, "detect_slack": False},
+        time=expected[0],
+        force=expected[1],
+        elongation=expected[2],
+        lines=np.arange(first, first + len(rows)),
+        must_fail=False,
+        what=what,
+    )
+
+
+def keyword_sweep(jc, folder: pathlib.Path) -> dict:
+    """Call every public reader and writer with a wrong value for each keyword
+    argument; count the errors that are no `TypeError`/`ValueError` naming it."""
+    path = folder / "ok.csv"
+    path.write_text("# length_mm: 10\ntime_s,force_N,elongation_mm\n0,0,0\n1,1,1\n")
+    data = jc.read_csv(path)
+    bad = (5, -1, "", "x", None, [1], {}, float("nan"), True, b"s", 1e309, object())
+    calls = {
+        **{
+            f"read_test({k}=)": (lambda v, k=k: jc.read_test(path, **{k: v}))
+            for k in (
+                "columns",
+                "skip_rows",
+                "length_mm",
+                "diameter_mm",
+                "rate_mm_per_min",
+                "temperature_C",
+                "material",
+                "id",
+                "encoding",
+                "delimiter",
+                "detect_slack",
+                "slack_threshold_N",
+            )
+        },
+        "read_test(path)": lambda v: jc.read_test(v),
+        "read_csv(path)": lambda v: jc.read_csv(v),
+        "read_csv(length_mm=)": lambda v: jc.read_csv(path, length_mm=v),
+        "write_csv(path)": lambda v: jc.write_csv(v, data),
+        "write_csv(data)": lambda v: jc.write_csv(folder / "w.csv", v),
+        "mask_slack(data)": lambda v: jc.mask_slack(v),
+        "mask_slack(threshold_N=)": lambda v: jc.mask_slack(data, threshold_N=v),
+        "detect_control(time)": lambda v: jc.detect_control(v, data.force, data.time),
+        "detect_control(force)": lambda v: jc.detect_control(data.time, v, data.time),
+    }
+    counts = {"calls": 0, "accepted": 0, "named": 0, "not_named": 0}
+    examples, accepted = [], []
+    for label, call in calls.items():
+        argument = label.split("(")[1].rstrip("=)")
+        for value in bad:
+            counts["calls"] += 1
+            try:
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")
+                    call(value)
+            except FileNotFoundError:
+                counts["named"] += argument == "path"  # no such file: as it must
+                counts["not_named"] += argument != "path"
+            except (TypeError, ValueError) as e:
+                if argument in str(e):
+                    counts["named"] += 1
+                    continue
+                counts["not_named"] += 1
+                examples.append(f"{label} {value!r}: {type(e).__name__}: {e}"[:200])
+            except Exception as e:  # noqa: BLE001 (counted)
+                counts["not_named"] += 1
+                examples.append(f"{label} {value!r}: {type(e).__name__}: {e}"[:200])
+            else:
+                counts["accepted"] += 1
+                accepted.append(f"{label} {value!r}")
+    counts["accepted_values"] = accepted
+    return {"counts": counts, "examples": examples[:10]}
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--files", type=int, default=10_000)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--out", type=pathlib.Path, default=None, help="keep failures")
+    parser.add_argument(
+        "--corpus-share",
+        type=float,
+        default=0.5,
+        help="the share of files that are mutated real exports (tests/data/exports)",
+    )
     args = parser.parse_args(argv)
 
     import random
@@ -432,8 +783,9 @@ def main(argv=None) -> int:
     import jaxcable as jc
 
     rng = random.Random(args.seed)
+    corpus = load_corpus(root / "tests" / "data" / "exports")
     counts = {"files": 0, "silently_wrong": 0, "crashes": 0, "over_2s": 0}
-    counts |= {"ok": 0, "refused_harmless": 0, "warned": 0}
+    counts |= {"ok": 0, "refused_harmless": 0, "warned": 0, "corpus": 0}
     examples: dict[str, list] = {
         "silently_wrong": [],
         "crashes": [],
@@ -445,7 +797,9 @@ def main(argv=None) -> int:
     started = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
         for i in range(args.files):
-            case = make_case(rng)
+            from_corpus = rng.random() < args.corpus_share
+            case = make_corpus_case(rng, corpus) if from_corpus else make_case(rng)
+            counts["corpus"] += from_corpus
             path = pathlib.Path(tmp) / f"case{i:06d}.csv"
             path.write_bytes(case.text)
             outcome, seconds, detail = check(case, path, jc.read_test)
@@ -467,9 +821,19 @@ def main(argv=None) -> int:
                     args.out.mkdir(parents=True, exist_ok=True)
                     (args.out / path.name).write_bytes(case.text)
             path.unlink()
+        here = pathlib.Path.cwd()
+        os.chdir(tmp)  # a bad file name such as 'x' is written there
+        try:
+            sweep = keyword_sweep(jc, pathlib.Path(tmp))
+        finally:
+            os.chdir(here)
     counts["slowest_s"] = round(slowest, 3)
     counts["total_s"] = round(time.perf_counter() - started, 1)
-    print(json.dumps({"counts": counts, "examples": examples}, indent=1))
+    print(
+        json.dumps(
+            {"counts": counts, "examples": examples, "keywords": sweep}, indent=1
+        )
+    )
     print()
     print(f"{'outcome':<36}{'files':>8}")
     rows = (
@@ -480,10 +844,16 @@ def main(argv=None) -> int:
         ("harmless files refused", "refused_harmless"),
         ("read right, with a numpy warning", "warned"),
         ("files", "files"),
+        ("of them mutated real exports", "corpus"),
     )
     for label, key in rows:
         print(f"{label:<36}{counts[key]:>8}")
+    for key, value in sweep["counts"].items():
+        if isinstance(value, list):
+            continue
+        print(f"{'bad keyword arguments: ' + key:<36}{value:>8}")
     bad = counts["silently_wrong"] + counts["crashes"] + counts["over_2s"]
+    bad += sweep["counts"]["not_named"]
     return 1 if bad else 0
 
 

@@ -239,3 +239,19 @@ def test_cli_prints_the_warning_as_one_line(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.count("\n") == 1
     assert err.startswith(f"jaxcable: warning: {path}, line 4: length_mm=20 given")
+
+
+def test_of_two_columns_of_one_quantity_the_plainer_is_read(tmp_path):
+    """`Extension` rather than `Tensile extension`, `Total Time` rather than `Cycle
+    Elapsed Time`; the others named in the one-line note."""
+    text = (
+        "Cycle Elapsed Time (s),Total Time (s),Tensile extension (mm),Extension (mm),"
+        "Load (N)\n"
+    )
+    for t, e, f in ROWS:
+        text += f"{t + 100},{t},{e * 2},{e},{f}\n"
+    data = jc.read_test(_write(tmp_path, "two.csv", text), length_mm=10)
+    _check_rows(data)
+    assert data.notes == (
+        "columns not read: 'Cycle Elapsed Time (s)', 'Tensile extension (mm)'",
+    )

@@ -121,7 +121,8 @@ def describe_tests(
     tests: Sequence[TestData], every: int, drives: Sequence | None = None
 ) -> list[str]:
     """One line per test: its name, samples, what was masked as slack, and (with
-    `drives`, a `ControlDetection` per test) its drive and why."""
+    `drives`, a `ControlDetection` per test) its drive and why; then its notes
+    (`TestData.notes`), one indented line each."""
     lines = []
     for i, t in enumerate(tests):
         name = pathlib.Path(t.source).name if t.source else t.metadata.get("id", "")
@@ -143,4 +144,6 @@ def describe_tests(
         if drives is not None:
             text += f"; drive: {drives[i].reason}"
         lines.append(text)
+        # How an instrument export was read: the columns it has that are not read.
+        lines.extend(f"    {note}" for note in getattr(t, "notes", ()))
     return lines

@@ -29,9 +29,16 @@ _MIN_BLOCK = 6
 _HELD_NOISE = 4.0
 _HELD_SHARE = 2e-3
 _MOVING = 3.0
+# ... and when its mean over the window is within this many standard errors (of a
+# difference of two window means) of a neighbouring window's mean.
+_LEVEL_NOISE = 3.0
 # In a window where both move, the channel whose straight-line fit leaves less than
 # 1 / _LINEAR_RATIO of the other's relative misfit is the one following a ramp.
 _LINEAR_RATIO = 3.0
+# A channel whose straight-line fit over the whole test leaves less than _STRAIGHT of
+# its range (and _STRAIGHT_RATIO times less than the other's) is the programmed one.
+_STRAIGHT = 1e-3
+_STRAIGHT_RATIO = 10.0
 # The detection names a channel when its evidence is at least _DECISIVE times the
 # other's, and at least _MIN_WINDOWS windows.
 _DECISIVE = 2.0
@@ -95,31 +102,76 @@ def _window_evidence(t, x, y) -> tuple[int, int]:
     n = t.size
     windows = max(1, min(_WINDOWS, n // _MIN_BLOCK))
     edges = np.unique(np.linspace(0, n, windows + 1).astype(int))
-    channels = []
+    channels, noises = [], []
     for z in (x, y):
         span = float(np.ptp(z)) or 1.0
-        channels.append((z, span, _HELD_NOISE * noise_std(z) + _HELD_SHARE * span))
+        noises.append(noise_std(z))
+        channels.append((z, span, _HELD_NOISE * noises[-1] + _HELD_SHARE * span))
     votes = [0, 0]
-    for a, b in zip(edges[:-1], edges[1:]):
-        if b - a < 4:
-            continue
+    pairs = [(a, b) for a, b in zip(edges[:-1], edges[1:]) if b - a >= 4]
+    # A channel is held only where its level also stays with those of the windows
+    # two before and after: a slow, noisy ramp (a force rising by less than its
+    # noise band per window) changes level from window to window, a hold does not.
+    levels = [[float(np.mean(z[a:b])) for a, b in pairs] for z, _, _ in channels]
+    for k, (a, b) in enumerate(pairs):
         tw = t[a:b] - t[a]
-        changes, misfits = [], []
-        for z, span, held in channels:
+        changes, misfits, steady = [], [], []
+        for c, (z, span, held) in enumerate(channels):
             zw = z[a:b]
             changes.append((float(np.ptp(zw)), span, held))
             coef = np.polyfit(tw, zw, 1)
             misfit = float(np.sqrt(np.mean((zw - np.polyval(coef, tw)) ** 2)))
             misfits.append(misfit / max(float(np.ptp(zw)), 1e-300))
+            near = [levels[c][j] for j in (k - 2, k + 2) if 0 <= j < len(pairs)]
+            band = _LEVEL_NOISE * noises[c] * np.sqrt(2.0 / (b - a))
+            band += _HELD_SHARE * span
+            steady.append(all(abs(levels[c][k] - m) <= band for m in near))
         moving = [c > _MOVING * h for c, _, h in changes]
-        held = [c < h for c, _, h in changes]
+        held = [c < h and s for (c, _, h), s in zip(changes, steady)]
+        # Changing level from window to window, if within the noise band in this
+        # one: a slow ramp of a noisy channel.
+        drifting = [m or not s for m, s in zip(moving, steady)]
         for i in (0, 1):
             j = 1 - i
             if held[i] and moving[j]:
                 votes[i] += 1
-            elif moving[i] and moving[j] and misfits[i] * _LINEAR_RATIO < misfits[j]:
+            elif moving[i] and drifting[j] and misfits[i] * _LINEAR_RATIO < misfits[j]:
                 votes[i] += 1
     return votes[0], votes[1]
+
+
+def _channel(value, name: str) -> np.ndarray:
+    """`value` as a 1-D float array, or a `TypeError`/`ValueError` naming `name`."""
+    if isinstance(value, str | bytes) or value is None:
+        raise TypeError(f"`{name}` must be an array of numbers, got {value!r}.")
+    try:
+        array = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise TypeError(f"`{name}` must be an array of numbers.") from None
+    if array.ndim != 1:
+        raise ValueError(f"`{name}` must be 1-dimensional, got shape {array.shape}.")
+    return array
+
+
+def _constant_rate(t, f, e) -> str | None:
+    """The channel that follows one straight line over the whole test (a test at
+    one crosshead speed or load rate, a yield plateau included) while the other
+    does not, or None."""
+    misfits = []
+    for z in (f, e):
+        span = float(np.ptp(z))
+        if span == 0:
+            return None
+        coef = np.polyfit(t - t[0], z, 1)
+        misfits.append(float(np.sqrt(np.mean((z - np.polyval(coef, t - t[0])) ** 2))))
+        misfits[-1] /= span
+    for name, mine, other in (
+        ("force", *misfits),
+        ("elongation", *misfits[::-1]),
+    ):
+        if mine < _STRAIGHT and other > _STRAIGHT_RATIO * mine:
+            return name
+    return None
 
 
 def detect_control(
@@ -127,13 +179,17 @@ def detect_control(
 ) -> ControlDetection:
     """Detect which channel a test imposed, from the data alone.
 
-    The history is cut into 40 blocks of samples (of at least 6). A block votes for the force when
-    the force is held (moves by less than 4 noise standard deviations plus 0.2 % of
-    its range) while the elongation moves (by more than 3 times its own such
-    threshold), or when
-    both move and the force is the straight line (a linear fit in time leaves less
-    than a third of the elongation's relative misfit): a hold or a ramp of the
-    machine's program. Likewise for the elongation. The channel with at least twice
+    A channel that follows one straight line in time over the whole test (its
+    linear fit leaves less than 0.1 % of its range, and ten times less than the
+    other's: a test at one crosshead speed or load rate) is named. Otherwise the
+    history is cut into 40 blocks of samples (of at least 6). A block votes for the
+    force when the force is held (moves by less than 4 noise standard deviations
+    plus 0.2 % of its range, and its mean stays within 3 standard errors of those
+    of the blocks two before and after) while the elongation moves (by more than 3
+    times its own such threshold), or when the force moves, the elongation moves
+    or changes level from block to block, and the force is the straight line (a
+    linear fit in time leaves less than a third of the elongation's relative
+    misfit): a hold or a ramp of the machine's program. Likewise for the elongation. The channel with at least twice
     the other's votes, and at least 3, is named; otherwise the evidence is
     ambiguous and the force is returned (jaxcable's historical drive), which the
     reason says.
@@ -148,14 +204,32 @@ def detect_control(
 
     A [`jaxcable.ControlDetection`][].
     """
-    t = np.asarray(time, float)
-    f = np.asarray(force, float)
-    e = np.asarray(elongation, float)
+    t, f, e = (
+        _channel(value, name)
+        for value, name in (
+            (time, "time"),
+            (force, "force"),
+            (elongation, "elongation"),
+        )
+    )
+    if not t.shape == f.shape == e.shape:
+        raise ValueError(
+            f"`time`, `force` and `elongation` must have one length, got "
+            f"{t.size}, {f.size} and {e.size}."
+        )
     ok = np.isfinite(t) & np.isfinite(f) & np.isfinite(e)
     t, f, e = t[ok], f[ok], e[ok]
     if t.size < 8:
         return ControlDetection(
             "force", "too few samples to detect the control: force (the default)"
+        )
+    whole = _constant_rate(t, f, e)
+    if whole is not None:
+        return ControlDetection(
+            whole,
+            f"detected {whole} control (it follows one straight line in time over "
+            "the whole test: a constant rate)",
+            detected=True,
         )
     votes_f, votes_e = _window_evidence(t, f, e)
     evidence = f"{votes_f} windows for force, {votes_e} for elongation"
@@ -198,4 +272,14 @@ def resolve_control(test, requested) -> ControlDetection:
     elongation = getattr(test, "elongation", None)
     if elongation is None:
         return ControlDetection("force", "force (the test has no elongation)")
-    return detect_control(test.time, test.force, elongation)
+    # The masked samples (a slack cable) follow neither the program nor the cable;
+    # the force as measured, not clipped at zero, follows the program.
+    mask = getattr(test, "mask", None)
+    keep = slice(None) if mask is None or not np.any(mask) else np.asarray(mask)
+    force = getattr(test, "force_raw", None)
+    force = test.force if force is None else force
+    return detect_control(
+        np.asarray(test.time)[keep],
+        np.asarray(force)[keep],
+        np.asarray(elongation)[keep],
+    )

@@ -23,6 +23,7 @@ from collections.abc import Mapping
 import numpy as np
 
 from .._files import atomic_path
+from .arguments import check_path
 from .parsing import (
     assemble,
     map_columns,
@@ -67,14 +68,18 @@ def read_csv(path: str | os.PathLike, **overrides: float | str) -> TestData:
     (in the file's unit or in seconds), a numeric metadata value that is not a
     finite number the [`jaxcable.Cable`][] accepts, or no `length_mm` metadata.
     """
-    return read_canonical(path, overrides)
+    check_path(path)
+    return read_canonical(path, overrides, raw=False)
 
 
 def read_canonical(
-    path, overrides, required: tuple[str, ...] = ("time", "force")
+    path, overrides, required: tuple[str, ...] = ("time", "force"), raw: bool = True
 ) -> TestData:
     """[`jaxcable.read_csv`][] with the `required` quantities (an elongation
-    history to simulate needs time and elongation, not force: its forces are NaN)."""
+    history to simulate needs time and elongation, not force: its forces are NaN);
+    with `raw`, a file whose first line after the `# key: value` block names no
+    canonical column (an instrument export) is read by [`jaxcable.read_test`][],
+    without slack detection (its values as written)."""
     lines = read_lines(path)
     metadata, header = parse_metadata(lines, path)
     if header == len(lines):
@@ -82,10 +87,14 @@ def read_canonical(
             f"{where(path, len(lines) + 1)}: no header line (expected e.g. "
             "'time_s,force_N' after the '# key: value' lines)."
         )
+    names = [cell.strip() for cell in split_cells(lines[header], ",")]
+    if raw and not any(name in COLUMNS for name in names):
+        from .raw import read_test  # the raw reader builds on this module's parser
+
+        return read_test(path, detect_slack=False, **overrides)
     for key, value in overrides.items():
         metadata[key] = metadata_value(key, value, f"{path}, argument {key}")
     header_line = header + 1
-    names = [cell.strip() for cell in split_cells(lines[header], ",")]
     columns = map_columns(names, path, header_line, required=required)
     values, line_numbers = parse_rows(lines, header + 1, columns, path)
     return assemble(path, columns, values, line_numbers, metadata, header_line)
@@ -140,6 +149,11 @@ def write_csv(path: str | os.PathLike, data: TestData) -> None:
 
     Nothing.
     """
+    check_path(path)
+    if not isinstance(data, TestData):
+        raise TypeError(
+            f"`data` must be a jaxcable.TestData, got {type(data).__name__}."
+        )
     _check_metadata_for_writing(data.metadata)
     names = []
     columns = []

@@ -12,7 +12,13 @@ from typing import NamedTuple
 
 from .parsing import metadata_value, parse_number, row_cells
 from .testdata import where
-from .vocabulary import CONTROL_MARKS, CONTROL_WORDS, METADATA_LABELS, METADATA_UNITS
+from .vocabulary import (
+    CONTROL_MARKS,
+    CONTROL_WORDS,
+    METADATA_LABELS,
+    METADATA_UNITS,
+    STRING_LABELS,
+)
 
 
 class MetadataConflictWarning(UserWarning):
@@ -33,24 +39,30 @@ _LABEL_INDEX = {
     for key, labels in METADATA_LABELS.items()
     for rank, label in enumerate(labels)
 }
+_STRING_INDEX = {
+    label: (key, rank)
+    for key, labels in STRING_LABELS.items()
+    for rank, label in enumerate(labels)
+}
 
 
 class Found(NamedTuple):
     """A metadata value of the instrument's block."""
 
-    value: float | None  # in the key's unit (mm, mm/min); None when unreadable
+    value: float | str | None  # in the key's unit (mm, mm/min), a string for `id`;
+    # None when unreadable
     line: int  # 1-based
     text: str  # as written, for messages: `'Specimen properties : Length' 14.33 mm`
     rank: int  # the label's place in `METADATA_LABELS` (0 is the most specific)
     problem: str = ""  # why `value` is None
 
 
-def _label_key(cell: str) -> tuple[str, int] | None:
+def _label_key(cell: str, index=_LABEL_INDEX) -> tuple[str, int] | None:
     """The metadata key and rank a label names (`Test : Rate 1` -> rate), or None."""
     label = cell.strip().rstrip(":=").rsplit(":", 1)[-1].strip().lower()
     label = re.sub(r"\s*[(\[][^)\]]{0,16}[)\]]$", "", label)  # `Length (mm)`
     label = re.sub(r"\s+\d+$", "", label)  # `Rate 1`
-    return _LABEL_INDEX.get(" ".join(label.split()))
+    return index.get(" ".join(label.split()))
 
 
 def _bracket_unit(cell: str) -> str | None:
@@ -82,7 +94,11 @@ def _read_line(
         return None
     named = _label_key(cells[0])
     if named is None:
-        return None
+        named = _label_key(cells[0], _STRING_INDEX)
+        if named is None or not cells[1]:
+            return None
+        key, rank = named  # a name (`Specimen label,"sample1"`), kept as written
+        return key, Found(cells[1], line, f"{cells[0]!r} {cells[1]!r}", rank)
     key, rank = named
     try:
         # A `;` or tab file may write a decimal comma in its block only.
@@ -222,7 +238,7 @@ def merge(
                 continue
             raise
         origin[key] = item.line
-        shown[key] = f"{merged[key]:g} ({item.text})"
+        shown[key] = f"{_show(merged[key])} ({item.text})"
     if control is not None and "control" not in merged:
         merged["control"] = control
     for key, value in given.items():

@@ -1,11 +1,13 @@
 """[`jaxcable.read_test`][]: one test from a canonical CSV file or a raw tensile-tester
 export, whose layout `sniff.py` detects, with the slack stretches masked."""
 
+import dataclasses
 import os
 from collections.abc import Sequence
 
 import numpy as np
 
+from .arguments import check_read_arguments, column_notes, derive_channels
 from .parsing import (
     ColumnMap,
     assemble,
@@ -95,16 +97,29 @@ def read_test(
     - *Columns*: `columns` names every column of the file in order with its unit;
         without it, a canonical header (`time_s,force_N,...`) is used, else a header
         matched best-effort: names such as `Time`, `Force`/`Load`,
-        `Elongation`/`Extension`/`Displacement`, `Temperature` (also in Chinese,
-        e.g. 时间, 力, 位移), with units in the name (`Force (kN)`, `Time/s`) or in a
-        units row below (`(s),(mm),(N)`); a crosshead displacement is read as the
-        elongation, and unmatched columns are ignored. Otherwise it is an error
-        naming the columns found and what each was read as, asking for `columns`
-        (`--columns`).
+        `Elongation`/`Extension`/`Displacement`/`Position`, `Temperature` (also in
+        Chinese, e.g. 时间, 力, 位移), with units in the name (`Force (kN)`,
+        `Time/s`) or in a units row below (`(s),(mm),(N)`, empty cells for columns
+        without a unit, any unit such as `(N/tex)` or `(mm/mm)`: a units row is
+        never the header); a crosshead displacement is read as the elongation. Of
+        two columns of one quantity the one with fewer words is read (`Extension`,
+        not `Tensile extension`; `Total Time`, not `Cycle Elapsed Time`; two with as
+        many are an error). A file with a stress column but no force column
+        (`Tensile stress` in MPa, N/mm², kPa, psi...) is read with the force = the
+        stress x the area of a circle of `diameter_mm` (from the file or given;
+        without it, an error saying to pass it), a strain column (mm/mm, %) without
+        an elongation column with the elongation = strain x `length_mm`. The other
+        columns are not read; `notes` names them in one line. Otherwise it is an
+        error naming the columns found and what each was read as, asking for
+        `columns` (`--columns`).
     - *Instrument exports* read as they come (header words, units, metadata labels
-        in `jaxcable/_io/vocabulary.py`): Instron Bluehill (`Specimen properties :
-        Length,"14.33000",mm`, `Test : Rate 1,"5.00000",mm/min`, `Extension,Load,
-        Tensile stress,Time` over `(mm),(N),(MPa),(s)`), Zwick testXpert
+        in `jaxcable/_io/vocabulary.py`; real exports in `tests/data/exports/`):
+        Instron Bluehill (`Specimen properties : Length,"14.33000",mm`, `Test :
+        Rate 1,"5.00000",mm/min`, `Specimen properties : Specimen label,"s1"` read
+        as `id`, `Extension,Load,Tensile stress,Time,PIP count,...` over
+        `(mm),(N),(MPa),(s),,...`), Instron WaveMatrix (`Total Time (s),...,
+        Position (mm),Force (kN)`), Walter+Bai (`C_1_Temps[s];C_1_Force[kN];
+        C_1_Déplacement[mm]`), Zwick testXpert
         (`;`-separated, decimal commas, `Einspannlänge;100,0;mm`,
         `Standardkraft;Standardweg;Prüfzeit` or `Standard force;Grip to grip
         separation;Test time` over `N;mm;s`), MTS TestSuite (tab-separated `Time`,
@@ -149,8 +164,10 @@ def read_test(
 
     **Raises:**
 
-    `ValueError` naming the file, the 1-based line and the column (its position and
-    name) of the first problem: a missing column or cell, a non-numeric, empty, NaN
+    `TypeError` or `ValueError` naming the argument of a keyword argument of the
+    wrong type or value (`encoding=5`, `skip_rows=-1`); `ValueError` naming the
+    file, the 1-based line and the column (its position and name) of the first
+    problem: a missing column or cell, a non-numeric, empty, NaN
     or infinite cell, a value out of range in SI units (`1e306` h), time not
     strictly increasing in the file's unit or in seconds (repeated time stamps
     included: remove them from the file), a header that names no time and force
@@ -159,8 +176,6 @@ def read_test(
     is not a finite number the [`jaxcable.Cable`][] accepts, or no `length_mm`; an
     instrument metadata line without a known unit, unless its value is given here.
     """
-    lines = read_lines(path, encoding)
-    metadata, first = parse_metadata(lines, path)
     overrides = {
         "length_mm": length_mm,
         "diameter_mm": diameter_mm,
@@ -169,6 +184,18 @@ def read_test(
         "material": material,
         "id": id,
     }
+    check_read_arguments(
+        path,
+        columns,
+        skip_rows,
+        overrides,
+        encoding,
+        delimiter,
+        detect_slack,
+        slack_threshold_N,
+    )
+    lines = read_lines(path, encoding)
+    metadata, first = parse_metadata(lines, path)
     given = {
         key: metadata_value(key, value, f"{path}, argument {key}")
         for key, value in overrides.items()
@@ -217,7 +244,11 @@ def read_test(
     values, line_numbers = parse_rows(
         lines, start, column_map, path, sep, decimal_comma, named_by
     )
+    notes = column_notes(column_map, named_by)
+    column_map = derive_channels(column_map, metadata, path, header_line)
     data = assemble(path, column_map, values, line_numbers, metadata, header_line)
+    if notes:
+        data = dataclasses.replace(data, notes=notes)
     if detect_slack:
         data = mask_slack(data, threshold_N=slack_threshold_N)
     return data

@@ -7,7 +7,14 @@ import re
 from .parsing import ColumnMap, map_columns, parse_number, row_cells
 from .testdata import where
 from .units import COLUMNS, IGNORE, missing_quantities, written_name
-from .vocabulary import HEADER_UNITS, HEADER_WORDS, UNIT_SPELLINGS
+from .vocabulary import (
+    HEADER_UNITS,
+    HEADER_WORDS,
+    STRAIN_UNITS,
+    STRESS_UNITS,
+    STRESS_WORDS,
+    UNIT_SPELLINGS,
+)
 
 
 _SEPARATORS = {",": "comma", ";": "semicolon", "\t": "tab"}
@@ -118,23 +125,54 @@ def _unit_cell(cell: str) -> str | None:
     if (
         bracketed
         and len(bare) <= 16
-        and not any(ch.isdigit() for ch in bare)
+        # Digits only beside letters, in one word: `(N/mm2)`, not `(Sample 1)`.
+        and not (any(ch.isdigit() for ch in bare) and (" " in bare))
         and (_NON_NUMBER_WORD.search(bare) or "%" in bare)
     ):
         return bare
     return None
 
 
-def _header_quantity(name: str) -> str | None:
+def _has_word(name: str, vocabulary) -> bool:
+    """Whether `name` holds a word of `vocabulary` (an ASCII word as a whole word of
+    `name`, any other anywhere in it)."""
     lowered = name.lower()
     words = set(re.split(r"[\W_]+", lowered))
+    return any(
+        (word.isascii() and word in words) or (not word.isascii() and word in lowered)
+        for word in vocabulary
+    )
+
+
+def _header_quantity(name: str) -> str | None:
     for quantity, vocabulary in HEADER_WORDS.items():
-        for word in vocabulary:
-            if (word.isascii() and word in words) or (
-                not word.isascii() and word in lowered
-            ):
-                return quantity
+        if _has_word(name, vocabulary):
+            return quantity
     return None
+
+
+def _derived(name: str, quantity: str | None, unit: str | None) -> ColumnMap | None:
+    """The column map of a stress column (`Tensile stress` in MPa, read as "stress"
+    in MPa) or a strain column (`Tensile strain` in %, read as "strain" in mm/mm),
+    or None."""
+    if unit is None:
+        return None
+    unit = unit.lower()
+    if unit in STRESS_UNITS and _has_word(name, STRESS_WORDS):
+        return ColumnMap(name, "stress", STRESS_UNITS[unit])
+    if unit in STRAIN_UNITS and quantity == "elongation":
+        return ColumnMap(name, "strain", STRAIN_UNITS[unit])
+    return None
+
+
+def _specificity(name: str) -> int:
+    """The number of words of a column name: of two columns of one quantity, the one
+    with fewer is read (`Extension` rather than `Tensile extension`, `Total Time`
+    rather than `Cycle Elapsed Time`, `Position` rather than `Digital Position`)."""
+    return len(_NON_NUMBER_RUN.findall(name))
+
+
+_NON_NUMBER_RUN = re.compile(r"[^\W\d_]+", re.UNICODE)
 
 
 def _match_header(
@@ -142,40 +180,74 @@ def _match_header(
 ) -> tuple[list[ColumnMap] | None, str]:
     """Best-effort column map of a non-canonical header (and units row).
 
+    Each column is read by its name and unit: time, force, elongation, temperature;
+    of two columns of one quantity the one with fewer words in its name (two with
+    as many are refused); a stress column stands for the force, and a strain column
+    for the elongation, where the file has none (quantities "stress" and "strain").
+    Every other column is not read (`IGNORE`, named with its unit).
+
     **Returns:**
 
-    `(columns, why)`: the column map (unmatched columns ignored), or `None` and why
-    the header does not do: what each column was read as, and a `columns` value
-    that would read it.
+    `(columns, why)`: the column map, or `None` and why the header does not do:
+    what each column was read as, and a `columns` value that would read it.
     """
     mapped: list[ColumnMap] = []
-    seen: dict[str, str] = {}
+    candidates: dict[str, list[tuple[int, int]]] = {}  # quantity -> (words, index)
     found: list[str] = []
     guess: list[str] = []
-    problem = ""
     for position, cell in enumerate(names, start=1):
         name, unit = _split_unit(cell)
-        if unit is None and units is not None and position <= len(units):
-            unit = _unit_cell(units[position - 1])
+        below = None
+        if units is not None and position <= len(units):
+            below = _unit_cell(units[position - 1])
+        if unit is None or (unit.lower() not in UNIT_SPELLINGS and below):
+            # `Tensile strain (Extension)` over `(mm/mm)`: the bracket is no unit.
+            name, unit = (name, below) if unit is None else (cell, below)
         quantity = _header_quantity(name)
         token = None
         if quantity is not None and unit is not None:
             token = HEADER_UNITS.get((quantity, unit.lower()))
-        found.append(f"{_show(cell)} ({_read_as(quantity, unit, token)})")
+        shown_name = cell if not below or unit is None else f"{cell} ({unit})"
         if token is None:
-            mapped.append(ColumnMap(cell or IGNORE, IGNORE, 1.0, position))
+            derived = _derived(shown_name, quantity, unit)
+            if derived is not None:
+                candidates.setdefault(derived.quantity, []).append(
+                    (_specificity(name), len(mapped))
+                )
+                found.append(f"{_show(cell)} ({derived.quantity})")
+                mapped.append(derived._replace(position=position))
+                guess.append(IGNORE)
+                continue
+            found.append(f"{_show(cell)} ({_read_as(quantity, unit, token)})")
+            mapped.append(ColumnMap(shown_name or IGNORE, IGNORE, 1.0, position))
             guess.append(
                 written_name(quantity)
-                if quantity is not None and quantity not in seen
+                if quantity is not None and quantity not in candidates
                 else IGNORE
             )
             continue
         guess.append(token)
-        if quantity in seen and not problem:
-            problem = f"two {quantity} columns ('{seen[quantity]}' and '{cell}')"
-        seen.setdefault(quantity, cell)
-        unit_info = COLUMNS[token]
-        mapped.append(ColumnMap(token, quantity, unit_info.to_si, position))
+        candidates.setdefault(quantity, []).append((_specificity(name), len(mapped)))
+        mapped.append(ColumnMap(token, quantity, COLUMNS[token].to_si, position))
+    problem = ""
+    for quantity, ranked in candidates.items():
+        ranked.sort()
+        if len(ranked) > 1 and ranked[0][0] == ranked[1][0] and not problem:
+            first, second = (names[mapped[i].position - 1] for _, i in ranked[:2])
+            problem = f"two {quantity} columns ('{first}' and '{second}')"
+        for _, i in ranked[1:]:  # the less specific: not read
+            column = mapped[i]
+            mapped[i] = ColumnMap(
+                names[column.position - 1], IGNORE, 1.0, column.position
+            )
+    for derived, channel in (("stress", "force"), ("strain", "elongation")):
+        if derived in candidates and channel in candidates:
+            for _, i in candidates.pop(derived)[:1]:
+                column = mapped[i]
+                mapped[i] = ColumnMap(column.name, IGNORE, 1.0, column.position)
+    seen = dict(candidates)
+    if "stress" in seen:
+        seen["force"] = seen["stress"]
     missing = missing_quantities(seen)
     if missing and not problem:
         problem = f"no {' and no '.join(missing)} column with a known unit"
@@ -263,7 +335,12 @@ def _is_content(text: str) -> bool:
 
 
 def _is_units_row(cells: list[str]) -> bool:
-    return bool(cells) and all(map(_unit_cell, cells))
+    """Whether a row is a units row: a unit in every cell but empty ones (a column
+    without a unit, `(mm),(N),,(N/tex)`), one at least."""
+    filled = [cell for cell in cells if cell.strip()]
+    if len(filled) < len(cells) and all(c.strip() == "-" for c in filled):
+        return False  # `,-,`: a row of missing values, not of units
+    return bool(filled) and all(map(_unit_cell, filled))
 
 
 def find_data_start(
@@ -285,7 +362,8 @@ def find_data_start(
             return index
     raise ValueError(
         f"{path}: no data rows found (rows of numbers separated by "
-        f"{_SEPARATORS.get(sep, repr(sep))}s)."
+        f"{_SEPARATORS.get(sep, repr(sep))}s"
+        f"{'' if sep in _SEPARATORS else ', the delimiter given'})."
     )
 
 

@@ -3,6 +3,7 @@ file's metadata), where its samples came from, and [`jaxcable.mask_slack`][], wh
 masks the samples a slack cable gives."""
 
 import dataclasses
+import math
 
 import numpy as np
 
@@ -67,6 +68,8 @@ class TestData:
     - `slack_report`: what [`jaxcable.mask_slack`][] found (a
         [`jaxcable.SlackReport`][]), or `None` when it has not run (e.g.
         [`jaxcable.read_csv`][]).
+    - `notes`: one line each about how the file was read that is no error (the
+        columns of an instrument export that are not read).
     """
 
     # pytest would otherwise try to collect this class wherever it is imported.
@@ -83,6 +86,7 @@ class TestData:
     mask: np.ndarray | None = None
     force_raw: np.ndarray | None = None
     slack_report: SlackReport | None = None
+    notes: tuple[str, ...] = ()
 
     def __post_init__(self):
         arrays = {"time": self.time, "force": self.force}
@@ -128,6 +132,7 @@ class TestData:
             extra[name] = converted[f"extra[{name!r}]"]
         object.__setattr__(self, "extra", extra)
         object.__setattr__(self, "metadata", dict(self.metadata))
+        object.__setattr__(self, "notes", tuple(str(n) for n in self.notes))
         if self.lines is not None:
             object.__setattr__(self, "lines", np.asarray(self.lines, dtype=int))
 
@@ -210,6 +215,21 @@ def mask_slack(data: TestData, *, threshold_N: float | None = None) -> TestData:
     A new [`jaxcable.TestData`][] with `mask`, `force`, `force_raw` and
     `slack_report` (a [`jaxcable.SlackReport`][]) set; any previous mask is replaced.
     """
+    if not isinstance(data, TestData):
+        raise TypeError(
+            f"`data` must be a jaxcable.TestData, got {type(data).__name__}."
+        )
+    if threshold_N is not None and (
+        isinstance(threshold_N, bool)
+        or not isinstance(threshold_N, int | float | np.integer | np.floating)
+    ):
+        raise TypeError(
+            f"`threshold_N` must be a number or None, got {type(threshold_N).__name__}."
+        )
+    if threshold_N is not None and not (
+        math.isfinite(float(threshold_N)) and threshold_N >= 0
+    ):
+        raise ValueError(f"`threshold_N` must be finite and >= 0, got {threshold_N!r}.")
     measured = data.force if data.force_raw is None else data.force_raw
     rate = data.metadata.get("rate_mm_per_min")
     speed = None if rate is None else speed_from_mm_per_min(float(rate))

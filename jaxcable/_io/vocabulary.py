@@ -6,7 +6,10 @@ units of their metadata lines and the words naming their control mode (read by
 Layouts known (each a header, maybe a units row, maybe metadata lines above it):
 
 - Instron Bluehill: `Specimen properties : Length,"14.33000",mm`, `Test : Rate
-    1,"5.00000",mm/min`, `Extension,Load,Tensile stress,Time` over `(mm),(N),(MPa),(s)`.
+    1,"5.00000",mm/min`, `Extension,Load,Tensile stress,Time,PIP count,Tenacity` over
+    `(mm),(N),(MPa),(s),,(N/tex)`; Bluehill Universal `1,Time,Displacement,Force`
+    over `,(s),(mm),(kN)`; WaveMatrix `Total Time (s),...,Position (mm),Force (kN)`.
+- Walter+Bai (French): `S/No;C_1_Temps[s];C_1_Force[kN];C_1_Déplacement[mm]`.
 - Zwick testXpert: `;`-separated with decimal commas, `Einspannlänge;100,0;mm`,
     `Standardkraft;Standardweg;Prüfzeit` (or `Standard force;Grip to grip
     separation;Test time`) over `N;mm;s`.
@@ -44,7 +47,10 @@ HEADER_WORDS = {
         "displacement",
         "stroke",
         "crosshead",
+        "position",  # Instron WaveMatrix's `Position (mm)`
         "deformation",
+        "déplacement",  # French exports (Walter+Bai)
+        "deplacement",
         "separation",  # Zwick's "Grip to grip separation"
         "strain",
         "traverse",
@@ -59,6 +65,23 @@ HEADER_WORDS = {
     ),
     "temperature": ("temperature", "temp", "temperatur", "温度"),
 }
+# Words of a stress column (read as the force, times the cross-section, where a file
+# has no force column) and their units (lower case) -> factor to MPa; the units of a
+# strain column (the elongation's words in these units: read as the elongation,
+# times the length, where a file has no elongation column) -> factor to mm/mm.
+STRESS_WORDS = ("stress", "spannung", "contrainte", "应力", "応力")
+STRESS_UNITS = {
+    "mpa": 1.0,
+    "n/mm²": 1.0,
+    "n/mm^2": 1.0,
+    "n/mm2": 1.0,
+    "kpa": 1e-3,
+    "pa": 1e-6,
+    "gpa": 1e3,
+    "psi": 6.894757293168361e-3,
+    "ksi": 6.894757293168361,
+}
+STRAIN_UNITS = {"mm/mm": 1.0, "in/in": 1.0, "m/m": 1.0, "%": 0.01}
 # Canonical column name (`units.COLUMNS`) -> the spellings of its unit in a header
 # or units row, lower case.
 _WRITTEN_UNITS = {
@@ -110,6 +133,13 @@ OTHER_UNITS = frozenset(
         "mm²",
         "mm^2",
         "-",
+        "n/tex",
+        "cn/tex",
+        "m/m",
+        "deg",
+        "°",
+        "n·m",
+        "n.m",
     )
 )
 UNIT_SPELLINGS = frozenset(unit for _, unit in HEADER_UNITS) | OTHER_UNITS
@@ -152,6 +182,11 @@ METADATA_LABELS = {
         "試験速度",
         "速度",
     ),
+}
+# Labels of the metadata lines read as strings (`Specimen properties : Specimen
+# label,"sample1"`), same rules as `METADATA_LABELS`.
+STRING_LABELS = {
+    "id": ("specimen label", "specimen id", "sample id", "probenkennung"),
 }
 # Unit as written (lower case) -> factor to the key's unit (mm, mm/min).
 LENGTH_UNITS = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4, "inch": 25.4}

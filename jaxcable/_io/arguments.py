@@ -1,0 +1,164 @@
+"""The keyword arguments of the public readers and writers, checked at the boundary
+(a wrong type or value is a `TypeError` or `ValueError` naming the argument), and the
+columns a raw export records in place of force and elongation: a stress column read
+as the force times the cross-section, a strain column as the elongation times the
+length, from the file's or the caller's metadata."""
+
+import math
+import os
+from collections.abc import Sequence
+
+import numpy as np
+
+from .parsing import ColumnMap
+from .testdata import where
+from .units import IGNORE
+
+
+def _is_number(value) -> bool:
+    return isinstance(value, int | float | np.integer | np.floating) and not isinstance(
+        value, bool
+    )
+
+
+def check_path(path, argument: str = "path") -> None:
+    """`TypeError` unless `path` is a file name (`str` or `os.PathLike`)."""
+    if not isinstance(path, str | os.PathLike):
+        raise TypeError(
+            f"`{argument}` must be a file name (str or os.PathLike), got "
+            f"{type(path).__name__}."
+        )
+    if not os.fspath(path):
+        raise ValueError(f"`{argument}` must be a file name, got ''.")
+
+
+def check_optional_text(value, argument: str) -> None:
+    """`TypeError` unless `value` is `None` or a string."""
+    if value is not None and not isinstance(value, str):
+        raise TypeError(
+            f"`{argument}` must be a string or None, got {type(value).__name__}."
+        )
+
+
+def check_flag(value, argument: str) -> None:
+    """`TypeError` unless `value` is a bool."""
+    if not isinstance(value, bool | np.bool_):
+        raise TypeError(f"`{argument}` must be True or False, got {value!r}.")
+
+
+def check_threshold(value, argument: str) -> None:
+    """`TypeError`/`ValueError` unless `value` is `None` or a finite number >= 0."""
+    if value is None:
+        return
+    if not _is_number(value):
+        raise TypeError(
+            f"`{argument}` must be a number or None, got {type(value).__name__}."
+        )
+    if not (math.isfinite(float(value)) and float(value) >= 0):
+        raise ValueError(f"`{argument}` must be finite and >= 0, got {value!r}.")
+
+
+def check_read_arguments(
+    path,
+    columns,
+    skip_rows,
+    metadata: dict,
+    encoding,
+    delimiter,
+    detect_slack,
+    slack_threshold_N,
+) -> None:
+    """Check the arguments of [`jaxcable.read_test`][] whose checks need no file
+    (the metadata values are checked against the file's by `merge`)."""
+    check_path(path)
+    if columns is not None:
+        if isinstance(columns, str):
+            pass
+        elif not isinstance(columns, Sequence) or not all(
+            isinstance(c, str) for c in columns
+        ):
+            raise TypeError(
+                "`columns` must be a string ('time_s,force_N,...') or a sequence of "
+                f"column names, got {columns!r}."
+            )
+        if not columns or (isinstance(columns, str) and not columns.strip()):
+            raise ValueError("`columns` must name the file's columns, got none.")
+    if skip_rows is not None and (
+        isinstance(skip_rows, bool) or not isinstance(skip_rows, int | np.integer)
+    ):
+        raise TypeError(f"`skip_rows` must be an integer or None, got {skip_rows!r}.")
+    if skip_rows is not None and skip_rows < 0:
+        raise ValueError(f"`skip_rows` must be >= 0, got {skip_rows}.")
+    for key in ("material", "id"):
+        if metadata.get(key) is not None and not isinstance(metadata[key], str):
+            raise TypeError(
+                f"`{key}` must be a string or None, got {type(metadata[key]).__name__}."
+            )
+    for key, value in metadata.items():
+        if key not in ("material", "id") and value is not None:
+            # A string is parsed as the file's values are (`"14.33"`).
+            if not (_is_number(value) or isinstance(value, str)):
+                raise TypeError(
+                    f"`{key}` must be a number or None, got {type(value).__name__}."
+                )
+    check_optional_text(encoding, "encoding")
+    if encoding is not None and not encoding.strip():
+        raise ValueError("`encoding` must name an encoding, got ''.")
+    check_optional_text(delimiter, "delimiter")
+    check_flag(detect_slack, "detect_slack")
+    check_threshold(slack_threshold_N, "slack_threshold_N")
+
+
+def _area_mm2(metadata: dict) -> float | None:
+    diameter = metadata.get("diameter_mm")
+    return None if diameter is None else math.pi * float(diameter) ** 2 / 4.0
+
+
+def derive_channels(
+    columns: list[ColumnMap], metadata: dict, path, header_line: int | None
+) -> list[ColumnMap]:
+    """The column map with a stress column read as the force (MPa x the area of a
+    circle of `diameter_mm`, N) and a strain column as the elongation (x
+    `length_mm`), where the file has no force or elongation column.
+
+    **Raises:**
+
+    `ValueError` naming the file, header line and column of a stress column when
+    the metadata have no `diameter_mm`, saying what to pass.
+    """
+    out = []
+    for column in columns:
+        if column.quantity == "stress":
+            area = _area_mm2(metadata)
+            if area is None:
+                raise ValueError(
+                    f"{where(path, header_line, column.name, column.position)}: the "
+                    "file records stress but no force; pass diameter_mm=... "
+                    "(--diameter-mm on the command line) to read the force as the "
+                    "stress times the cross-section (pi d^2 / 4), or columns=... "
+                    "(--columns) naming a force column."
+                )
+            column = column._replace(quantity="force", to_si=column.to_si * area)
+        elif column.quantity == "strain":
+            length = metadata.get("length_mm")
+            if length is None:
+                column = column._replace(quantity=IGNORE)  # assemble asks for it
+            else:
+                to_m = column.to_si * float(length) * 1e-3
+                column = column._replace(quantity="elongation", to_si=to_m)
+        out.append(column)
+    return out
+
+
+def column_notes(columns: list[ColumnMap], named_by: str) -> tuple[str, ...]:
+    """One line naming the columns of a header that are not read (none for a
+    `columns` value, which names them itself), and one per derived channel."""
+    if named_by != "the header":
+        return ()
+    notes = []
+    skipped = [
+        repr(c.name) for c in columns if c.quantity == IGNORE and c.name != IGNORE
+    ]
+    if skipped:
+        notes.append(f"columns not read: {', '.join(skipped)}")
+    return tuple(notes)
