@@ -88,6 +88,15 @@ def test_two_causes_are_both_named(two_causes):
     }
 
 
+def test_the_report_shows_every_round(two_causes, tmp_path):
+    tests, d = two_causes
+    written = jc.write_diagnosis_report(tmp_path, d, tests)
+    assert [p.name for p in written][-1] == "rounds.png"
+    assert all(p.stat().st_size > 0 for p in written)
+    summary = (tmp_path / "summary.md").read_text()
+    assert "round 2" in summary and "(squares)" in summary
+
+
 @pytest.mark.slow
 def test_one_round_stops_after_the_first_cause(two_causes):
     tests, d = two_causes

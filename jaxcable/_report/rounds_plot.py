@@ -11,7 +11,7 @@ import numpy as np
 from .._diagnose import MAX_FLOOR_RATIO, Diagnosis, scored_residuals
 from .._drive import FORCE_DRIVEN
 from .._models import DiscoveredTerm
-from .plots import save_png, time_axis
+from .plots import residual_axes, save_png, time_axis
 
 
 def rounds_of(diagnosis: Diagnosis) -> tuple[Diagnosis, ...]:
@@ -30,9 +30,10 @@ def cause_fits(diagnosis: Diagnosis):
 
 def residuals(result, diagnosis: Diagnosis, tests, covariate=None) -> list:
     """Model minus measured value of every test's scored channel, in the diagnosis's
-    unit (mm of elongation, N of force, or noise units)."""
-    drives = diagnosis.drives or (FORCE_DRIVEN,) * len(tests)
-    scales = diagnosis.scales or (1.0,) * len(tests)
+    unit (mm of elongation, N of force, or noise units); `tests` are the first of
+    the diagnosis's."""
+    drives = (diagnosis.drives or (FORCE_DRIVEN,) * len(tests))[: len(tests)]
+    scales = (diagnosis.scales or (1.0,) * len(tests))[: len(tests)]
     factor = 1e3 if diagnosis.unit == "mm" else 1.0
     values = scored_residuals(result, tests, drives, scales, covariate=covariate)
     return [factor * r for r in values]
@@ -75,16 +76,18 @@ def plot_rounds(path, diagnosis: Diagnosis, tests: list) -> None:
         fontsize=10,
     )
     if shown:
-        r, c = discovered[0]
-        term = _layer(c)
-        off = _without_term(c.fit.model, term)
-        with_term = residuals(c.fit.model, diagnosis, shown, c.covariate)
-        without = residuals(off, diagnosis, shown, c.covariate)
-        before = residuals(r.base_fit, diagnosis, shown, r.covariate)
+        final = diagnosis.extended_fit().model
+        covariate = next((x.covariate for _, x in causes if x.covariate), None)
+        with_term = residuals(final, diagnosis, shown, covariate)
+        without = residuals(_without_term(final), diagnosis, shown, covariate)
         for i, t in enumerate(shown):
             a = fig.add_subplot(grid[1, i])
             x, label, log = time_axis(np.asarray(t.time, float))
-            a.plot(x, -before[i], color="0.6", lw=0.8, label="measured - base")
+            # The residual the term removes: measured minus the final model with the
+            # term switched off (the other parameters as fitted).
+            a.plot(
+                x, -without[i], color="0.6", lw=0.8, label="measured - model without it"
+            )
             a.plot(
                 x,
                 with_term[i] - without[i],
@@ -92,12 +95,9 @@ def plot_rounds(path, diagnosis: Diagnosis, tests: list) -> None:
                 lw=1.0,
                 label="discovered term",
             )
-            if log:
-                a.set_xscale("symlog")
-            a.set_xlabel(label)
-            a.set_title(diagnosis.test_ids[i], fontsize=8)
+            residual_axes(a, diagnosis.test_ids[i], label, log, diagnosis.unit)
+            a.set_ylabel(f"elongation [{diagnosis.unit}]")
             if i == 0:
-                a.set_ylabel(diagnosis.unit)
                 a.legend(fontsize=7)
     fig.suptitle("Held-out RMSE round by round; the discovered state's strain")
     save_png(fig, path)
@@ -108,11 +108,17 @@ def _layer(candidate):
     return candidate.fit.model if candidate.fit is not None else None
 
 
-def _without_term(model: DiscoveredTerm, term: DiscoveredTerm):
-    """`model` (the discovered term around its base) with every theta 0."""
-    names = [n for n in term.used_fields() if n.startswith("theta")]
-    return eqx.tree_at(
-        lambda m: [getattr(m, n) for n in names],
-        model,
-        [jnp.zeros_like(getattr(model, n)) for n in names],
-    )
+def _without_term(model):
+    """`model` with every theta of the discovered term in it (at any depth) 0."""
+    path, layer = [], model
+    while not isinstance(layer, DiscoveredTerm):
+        path.append("base")
+        layer = layer.base
+    names = [n for n in layer.used_fields() if n.startswith("theta")]
+
+    def where(m):
+        for step in path:
+            m = getattr(m, step)
+        return [getattr(m, n) for n in names]
+
+    return eqx.tree_at(where, model, [jnp.zeros_like(x) for x in where(model)])
