@@ -36,6 +36,7 @@ from .library import (
     DiscoveredTerm,
     base_fit_names,
     base_start,
+    covariate_in,
     library,
     memory_equation,
     memory_library,
@@ -129,10 +130,9 @@ def _equation(terms, values, stderr, covariate, rates) -> str:
         err = f" (+-{se:.2g})" if math.isfinite(se) else ""
         value = f"{v:.3g}{err} {theta_unit(t, f'[{name}]')}"
         if t in MEMORY_TERMS:
-            rate_unit = MEMORY_TERMS[t][2].replace("c", f"[{name}]")
-            states.append(
-                "eps += " + memory_equation(t, value, f"{rate:.3g} {rate_unit}", name)
-            )
+            rate_unit = covariate_in(MEMORY_TERMS[t][2], f"[{name}]")
+            rate_text = f"{rate:.3g}" + ("" if rate_unit == "-" else f" {rate_unit}")
+            states.append("eps += " + memory_equation(t, value, rate_text, name))
             continue
         symbol = TERMS[t][0].replace("c", name) if t in COVARIATE_TERMS else TERMS[t][0]
         parts.append(f"{value} * {symbol}")

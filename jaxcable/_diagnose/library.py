@@ -23,6 +23,7 @@ MEMORY_TERMS = memory.MEMORY_TERMS
 SIGMA_REF = memory.SIGMA_REF
 memory_column = memory.memory_column
 memory_equation = memory.memory_equation
+covariate_in = memory.covariate_in
 rate_grid = memory.rate_grid
 DiscoveredTerm = discovered.DiscoveredTerm
 cycle_count = discovered.cycle_count

@@ -22,7 +22,7 @@ from ..base import (
 )
 from ..fields import parameter, signed_effect
 from ..kernels import running_max, tension_time_step
-from .memory import MEMORY_TERMS, memory_step, memory_strain
+from .memory import MEMORY_TERMS, covariate_in, memory_step, memory_strain
 
 
 # Each term of the library: its symbol in an equation and its unit ("c" stands for
@@ -55,7 +55,7 @@ def theta_unit(term: str, covariate_unit: str = "c") -> str:
     unit written `covariate_unit`); for a term with memory its own
     (`MEMORY_TERMS`)."""
     if term in MEMORY_TERMS:
-        return MEMORY_TERMS[term][1].replace("c", covariate_unit)
+        return covariate_in(MEMORY_TERMS[term][1], covariate_unit)
     unit = TERMS[term][1]
     per_second = unit.endswith("/s")
     unit = unit.removesuffix("/s")

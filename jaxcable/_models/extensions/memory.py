@@ -23,6 +23,8 @@ Each term has one nonlinear parameter, k (1 / unit of the driver) or b (-), in t
 `rate` field of its slot; theta is linear, as for the stateless terms.
 """
 
+import re
+
 import jax.numpy as jnp
 from jaxtyping import Array
 
@@ -96,6 +98,12 @@ RATE_GRID: dict[str, tuple[float, ...]] = {
     "damage_cycles": (1.0, 2.0, 4.0),
     "damage_time": (1.0, 2.0, 4.0),
 }
+
+
+def covariate_in(unit: str, covariate_unit: str) -> str:
+    """`unit` with its covariate's unit, the symbol `c`, written `covariate_unit`
+    (`1/c` -> `1/[humidity_pct]`; `1/cycle` unchanged)."""
+    return re.sub(r"\bc\b", covariate_unit, unit)
 
 
 def rate_grid(term: str, covariate_variation: float = 1.0) -> tuple[float, ...]:
