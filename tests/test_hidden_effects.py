@@ -1,7 +1,8 @@
-"""The hidden effects outside the diagnosis catalogue: their data sets have the
-in-catalogue format, their contributions the documented size and story, and they are
-reproducible by seed. (No diagnosis here: `benchmarks/diagnose_matrix.py
---out-of-catalogue` runs them.)"""
+"""The hidden effects outside the diagnosis catalogue, and the data sets with two
+catalogue effects at once: their data sets have the in-catalogue format, their
+contributions the documented size and story, and they are reproducible by seed. (No
+diagnosis here: `benchmarks/diagnose_matrix.py --out-of-catalogue` and
+`benchmarks/diagnose_rounds.py` run them.)"""
 
 import numpy as np
 import pytest
@@ -73,8 +74,10 @@ def test_contribution_is_the_effect(effect, datasets, base):
         added = t.elongation - b.elongation
         np.testing.assert_allclose(added, e - e0, atol=1e-9)
         assert added[0] == 0.0
-        # Irreversible (slip, damage under load, sorptive creep): never negative.
-        assert np.min(added) > -1e-9
+        # Irreversible or stress-driven (slip, damage, sorptive creep): never
+        # negative; a swelling follows the humidity either way.
+        if effect != "lagged_swelling":
+            assert np.min(added) > -1e-9
         np.testing.assert_allclose(t.elongation - e, b.elongation - e0, atol=1e-9)
 
 
@@ -153,3 +156,195 @@ def test_unknown_effect_is_refused():
         )
     with pytest.raises(ValueError, match="effect"):
         papers.hidden_effect_model("clamp_slip", seed=0)
+
+
+# ----------------------------------------------------------------------------------
+# Effects with a state of their own.
+
+
+def test_memory_effects_registered():
+    assert len(papers.MEMORY_EFFECTS) == 3
+    for effect in papers.MEMORY_EFFECTS:
+        assert papers.OUT_OF_CATALOGUE[effect]["memory"] is True
+    others = set(EFFECTS) - set(papers.MEMORY_EFFECTS)
+    assert others and not any(papers.OUT_OF_CATALOGUE[e]["memory"] for e in others)
+
+
+def _holds(test):
+    """The index ranges of the two 1 h creep holds (the force at its peak)."""
+    on = test.force > 0.99 * np.max(test.force)
+    edges = np.flatnonzero(np.diff(on.astype(int)))
+    # Two pre-cycles touch the peak once each; the holds are the two long runs.
+    runs = [(a + 1, b + 1) for a, b in zip(edges[::2], edges[1::2])]
+    return sorted(runs, key=lambda r: test.time[r[1] - 1] - test.time[r[0]])[-2:]
+
+
+def test_cycling_humidity_cycles_strongly(datasets):
+    for i, t in enumerate(datasets["saturating_sorptive"]):
+        h = t.extra["humidity_pct"]
+        assert np.min(h) < 36 and np.max(h) > 74
+        # Six to nine wet-dry cycles over the 6 h test: >= 12 crossings of the
+        # middle, most of them seen by the records too.
+        climate = hidden_effects.cycling_humidity(3, i)
+        fine = climate(np.linspace(0, t.time[-1], 20000))
+        assert np.sum(np.diff(np.sign(fine - 55.0)) != 0) >= 12
+        assert np.sum(np.diff(np.sign(h - 55.0)) != 0) >= 8
+
+
+def test_saturating_sorptive_steps_shrink(datasets, base):
+    """Under a constant load the strain steps with each humidity change, by less
+    each time, towards sigma J_ms and never past it; at rest it recovers."""
+    size = papers.OUT_OF_CATALOGUE["saturating_sorptive"]["size"]
+    area = np.pi * 3e-3**2 / 4
+    design = synthetic.HIDDEN_EFFECT_DESIGN
+    tests, free = (
+        datasets["saturating_sorptive"],
+        papers.truth_elongations(None, seed=3),
+    )
+    truth = papers.truth_elongations("saturating_sorptive", seed=3)
+    for (length, _, force, _), t, e, e0 in zip(design, tests, truth, free):
+        added = (e - e0) / (length * 1e-3)
+        ceiling = size * force / area
+        assert np.max(added) <= ceiling * (1 + 1e-9)
+        first, _ = _holds(t)
+        held = added[first[0] : first[1]]
+        # A saturating approach: more than half way after 1 h of cycling...
+        assert held[-1] > 0.5 * ceiling
+        # ...and the first half hour gains more than the second.
+        half = np.searchsorted(t.time[first[0] : first[1]], t.time[first[0]] + 1800)
+        assert held[half] - held[0] > held[-1] - held[half]
+        # Recovery at rest, with the humidity changes: far below the hold's end.
+        rest = first[1] + np.searchsorted(t.time[first[1] :], t.time[first[1]] + 5400)
+        assert added[rest] < 0.3 * held[-1]
+
+
+def test_fatigue_accelerates():
+    """D / (1 - D) grows faster cycle after cycle (the stroke runs away), steeply
+    with the stress; a history that reaches failure is refused."""
+    peak = 160.0
+    one = np.array([0.0, peak, 0.0])
+    history = np.concatenate([one] + [one[1:]] * 3)
+    grown = hidden_effects._fatigue(history, 3e-3)[2::2]
+    steps = np.diff(np.concatenate([[0.0], grown]))
+    assert np.all(np.diff(steps) > 0)
+    # Not failing: D / (1 - D) < 9 (D < 0.9) after the design's four cycles.
+    assert 0.3 < grown[-1] < 9.0
+    # (80/160)^5 = 1/32 of the damage per cycle at half the force.
+    half = hidden_effects._fatigue(history / 2, 3e-3)[2::2]
+    assert half[-1] < 0.02 * grown[-1]
+    with pytest.raises(ValueError, match="force"):
+        hidden_effects._fatigue(np.concatenate([one] + [one[1:]] * 20), 3e-3)
+
+
+def test_fatigue_effect_is_elastic_and_damaged(datasets, base):
+    tests = datasets["fatigue_damage"]
+    size = papers.OUT_OF_CATALOGUE["fatigue_damage"]["size"]
+    for (length, _, force, _), t, b in zip(synthetic.HIDDEN_EFFECT_DESIGN, tests, base):
+        added = t.elongation - b.elongation
+        first, second = _holds(t)
+        mid = [added[(a + z) // 2] for a, z in (first, second)]
+        elastic = size * length * 1e-3 * force / hidden_effects.EA_REF
+        # One more cycle before the second hold: more damage, by a larger factor
+        # the nearer failure (x 1.4 at small damage, 2.5 -> 3.5 cycles).
+        assert mid[1] > (1.8 if force > 150 else 1.3) * mid[0]
+        assert mid[1] < 9.0 * elastic
+        if force > 150:
+            assert mid[1] > 0.5 * elastic
+        np.testing.assert_allclose(added[-1], 0.0, atol=1e-12)  # unloaded: none left
+
+
+def test_lagged_swelling_lags_the_humidity(datasets):
+    """alpha L0 (q - h0), q the humidity seen through a first-order lag: against a
+    fine explicit integration of the same climate."""
+    alpha = papers.OUT_OF_CATALOGUE["lagged_swelling"]["size"]
+    tau = hidden_effects.SWELLING_TAU
+    t = datasets["lagged_swelling"][1]
+    length = synthetic.HIDDEN_EFFECT_DESIGN[1][0] * 1e-3
+    climate = hidden_effects.stepped_humidity(3, 1)
+    fine = np.linspace(0.0, t.time[-1], 400001)
+    h, q = climate(fine), np.empty_like(fine)
+    q[0] = h[0]
+    dt = fine[1] - fine[0]
+    for i in range(1, fine.size):
+        q[i] = q[i - 1] + dt * (h[i - 1] - q[i - 1]) / tau
+    expected = alpha * length * (np.interp(t.time, fine, q) - h[0])
+    added, _ = hidden_effects.effect_elongation(
+        "lagged_swelling",
+        t.time,
+        t.force,
+        length=length,
+        diameter=3e-3,
+        seed=3,
+        index=1,
+    )
+    np.testing.assert_allclose(added, expected, atol=1e-3 * np.max(np.abs(expected)))
+    # It lags: the instantaneous alpha L0 (h - h0) is far from it.
+    instant = alpha * length * (climate(t.time) - h[0])
+    assert np.sqrt(np.mean((instant - added) ** 2)) > 0.1 * np.max(np.abs(added))
+    # Load-free: the same at zero force.
+    unloaded, _ = hidden_effects.effect_elongation(
+        "lagged_swelling",
+        t.time,
+        0 * t.force,
+        length=length,
+        diameter=3e-3,
+        seed=3,
+        index=1,
+    )
+    np.testing.assert_array_equal(added, unloaded)
+
+
+# ----------------------------------------------------------------------------------
+# Two catalogue effects at once.
+
+
+def test_pairs_cover_the_catalogue():
+    pairs = papers.HIDDEN_PAIRS
+    assert len(pairs) >= 10
+    assert {e for p in pairs for e in p} == set(jc.EXTENSIONS)
+    for pair, multiples in pairs.items():
+        assert set(multiples) == set(pair) and pair[0] != pair[1]
+        assert all(3.0 <= m <= 10.0 for m in multiples.values())
+        for effect, size in zip(pair, papers.pair_sizes(pair)):
+            limit = papers.HIDDEN_EFFECTS[effect]["size"]
+            strength = limit / size if effect == "second_retardation" else size / limit
+            assert strength == pytest.approx(multiples[effect])
+
+
+def test_pair_model_nests_the_two_effects():
+    pair = ("second_retardation", "termination_compliance")
+    model = papers.hidden_pair_model(pair, seed=3)
+    assert type(model) is jc.EXTENSIONS[pair[1]]
+    assert type(model.base) is jc.EXTENSIONS[pair[0]]
+    assert model.base.base == papers.hidden_effect_model(None, seed=3)
+    size_a, size_b = papers.pair_sizes(pair)
+    assert float(model.compliance) == size_b
+    assert float(model.base.E_k) == size_a
+    assert float(model.base.tau_k) == papers.HIDDEN_EFFECTS[pair[0]]["fixed"]["tau_k"]
+
+
+def test_pair_dataset_is_the_single_design():
+    """With the inner effect at its null size a pair's data set is the outer
+    effect's single-effect data set: same design, protocol, noise and seeds."""
+    pair = ("termination_compliance", "sensor_drift")
+    size = papers.pair_sizes(pair)[1]
+    tests = papers.hidden_pair_dataset(pair, seed=3, sizes=(0.0, size))
+    single = papers.hidden_effect_dataset("sensor_drift", seed=3, size=size)
+    for t, s in zip(tests, single):
+        assert t.metadata["hidden_effect"] == "termination_compliance+sensor_drift"
+        assert t.metadata["id"] == s.metadata["id"]
+        np.testing.assert_array_equal(t.force, s.force)
+        np.testing.assert_allclose(t.elongation, s.elongation, atol=1e-12)
+    # The noise-free truth: the data within the noise of it.
+    truth = papers.pair_truth_elongations(pair, seed=3, sizes=(0.0, size))
+    r = np.concatenate([t.elongation - e for t, e in zip(tests, truth)])
+    assert 3e-6 < np.sqrt(np.mean(r**2)) < 8e-6
+
+
+def test_bad_pairs_are_refused():
+    with pytest.raises(TypeError, match="pair"):
+        papers.hidden_pair_model("sensor_drift", seed=0)
+    with pytest.raises(ValueError, match="pair"):
+        papers.hidden_pair_dataset(("sensor_drift", "clamp_slip"), seed=0)
+    with pytest.raises(ValueError, match="pair"):
+        papers.pair_sizes(("sensor_drift", "sensor_drift"))

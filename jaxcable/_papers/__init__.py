@@ -3,10 +3,20 @@ from .calibration import (
     Calibration as Calibration,
     calibrate_sk78 as calibrate_sk78,
 )
+from .combined_effects import (
+    HIDDEN_PAIRS as HIDDEN_PAIRS,
+    hidden_pair_dataset as hidden_pair_dataset,
+    hidden_pair_model as hidden_pair_model,
+    pair_sizes as pair_sizes,
+    pair_truth_elongations as pair_truth_elongations,
+)
 from .hidden_effects import (
+    MEMORY_EFFECTS as MEMORY_EFFECTS,
     OUT_OF_CATALOGUE as OUT_OF_CATALOGUE,
+    cycling_humidity as cycling_humidity,
     effect_elongation as effect_elongation,
     humidity_climate as humidity_climate,
+    stepped_humidity as stepped_humidity,
 )
 from .park import (
     SK78_TARGETS as SK78_TARGETS,
