@@ -9,11 +9,13 @@ when a round names nothing, or after `max_rounds`.
 
 A round that names nothing but has significant candidates (each explains part of the
 excess, none enough: two effects of similar size, say) takes its best one as a
-*partial* cause and goes on. The partial cause is kept only when the rounds after it
-name their causes and, together with it, explain what its round's base left:
-within `MAX_FLOOR_RATIO` x the noise, or `MIN_EXPLAINED_PCT` % of that excess in
-squares ([`sufficient`][]). Otherwise it is reported as tried (`accepted` False) and
-the verdict stays what the rounds before it gave.
+*partial* cause and goes on: its best catalogue or covariate candidate, a discovered
+term only when none is significant. Partial causes are kept only when a later round
+names its cause and, together with them, it explains what the first partial
+cause's round's base left: within `MAX_FLOOR_RATIO` x the noise, or
+`MIN_EXPLAINED_PCT` % of that excess in squares ([`sufficient`][]). Otherwise they
+are reported as tried (`accepted` False) and the verdict stays what the rounds
+before them gave.
 """
 
 import dataclasses
@@ -108,8 +110,11 @@ def one_round(
 
 
 def partial_cause(d: Diagnosis) -> Candidate | None:
-    """The significant candidate of largest held-out gain of a round that named
-    nothing though its base is above the noise, or None."""
+    """The cause a round that named nothing though its base is above the noise goes
+    on with: its significant catalogue or covariate candidate of largest held-out
+    gain, else a significant discovered term (the discovery is the last resort, as
+    in a round: a term fitted to two effects at once stands in for both and leaves
+    the next round nothing it can name); or None."""
     if d.verdict != "unexplained":
         return None
     able = [
@@ -117,7 +122,8 @@ def partial_cause(d: Diagnosis) -> Candidate | None:
         for c in d.candidates
         if c.significant and c.fit is not None and not c.diverging
     ]
-    return max(able, key=lambda c: c.gain_pct, default=None)
+    known = [c for c in able if c.id != "discovered"]
+    return max(known or able, key=lambda c: c.gain_pct, default=None)
 
 
 def next_base(base: RoundBase, cause: Candidate) -> RoundBase:
@@ -172,7 +178,7 @@ def diagnose_rounds(
         plans.append(plan)
         cause = d.candidate(d.named_cause) if d.verdict == "named" else None
         partial = None
-        if cause is None and pending is None and k + 1 < max_rounds:
+        if cause is None and k + 1 < max_rounds:
             partial = partial_cause(d)
         if cause is None and partial is None:
             rounds.append(d)
@@ -181,7 +187,8 @@ def diagnose_rounds(
         d = _with_cause(d, cause)
         rounds.append(d)
         if partial is not None:
-            pending = k
+            # A chain of partial causes is judged from its first round on.
+            pending = k if pending is None else pending
         elif pending is not None:
             start = rounds[pending]
             if sufficient(start.base_heldout_rmse, cause.heldout_rmse, start.noise):
