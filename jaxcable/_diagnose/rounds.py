@@ -13,7 +13,9 @@ excess, none enough: two effects of similar size, say) takes its best one as a
 term only when none is significant. Partial causes are kept only when a later round
 names its cause and, together with them, it explains what the first partial
 cause's round's base left: within `MAX_FLOOR_RATIO` x the noise, or
-`MIN_EXPLAINED_PCT` % of that excess in squares ([`sufficient`][]). Otherwise they
+`MIN_EXPLAINED_PCT` % of that excess in squares ([`sufficient`][]); a chain that
+starts with a known cause is confirmed by known causes only (a discovered term
+fitted after a wrong partial cause absorbs what it got wrong). Otherwise they
 are reported as tried (`accepted` False) and the verdict stays what the rounds
 before them gave.
 """
@@ -191,7 +193,16 @@ def diagnose_rounds(
             pending = k if pending is None else pending
         elif pending is not None:
             start = rounds[pending]
-            if sufficient(start.base_heldout_rmse, cause.heldout_rmse, start.noise):
+            # A known partial cause is confirmed by known causes only: a discovered
+            # term fitted after it can absorb whatever the partial cause got wrong
+            # (a slipping clamp read as a sensor drift, then "completed").
+            known = (
+                all(r.named_cause != "discovered" for r in rounds[pending:])
+                or rounds[pending].named_cause == "discovered"
+            )
+            if known and sufficient(
+                start.base_heldout_rmse, cause.heldout_rmse, start.noise
+            ):
                 pending, kept = None, k + 1
         else:
             kept = k + 1
