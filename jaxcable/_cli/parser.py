@@ -1,10 +1,8 @@
-"""The argparse tree of the `jaxcable` command line: its commands, their options, and
-the validators of numeric options."""
+"""The argparse tree of the `jaxcable` command line: its commands and their options
+(the validators of numeric options in `numbers.py`)."""
 
 import argparse
 import importlib.metadata
-import math
-from collections.abc import Callable
 
 from .._models import (
     BY_CLI_NAME,
@@ -18,6 +16,14 @@ from .common import PROG, CliError
 from .demo import demo_command
 from .diagnose import diagnose_command
 from .fit import add_out_options, fit_command
+from .numbers import (
+    MAX_SAMPLES_PER_RAMP as MAX_SAMPLES_PER_RAMP,
+    non_negative_int as _non_negative_int,
+    positive_float as _positive_float,
+    positive_int as _positive_int,
+    samples_per_ramp as _samples_per_ramp,
+    seed as _seed,
+)
 from .simulate import simulate_command
 
 
@@ -32,58 +38,6 @@ def _version() -> str:
         return importlib.metadata.version("jaxcable")
     except importlib.metadata.PackageNotFoundError:  # pragma: no cover
         return "unknown"
-
-
-def _number(
-    convert: type, noun: str, valid: Callable[[float], bool], requirement: str
-) -> Callable[[str], int | float]:
-    """An argparse `type`: `convert(text)`, refused unless `valid(value)`.
-
-    **Arguments:**
-
-    - `convert`: `int` or `float`.
-    - `noun`: what `convert` parses, for the error ("an integer").
-    - `valid`: whether a parsed value is acceptable.
-    - `requirement`: what an acceptable value is, for the error ("must be at least 1").
-    """
-
-    def parse(text: str):
-        # A value of thousands of digits is cut short: the error is one line.
-        shown = text if len(text) <= 30 else f"{text[:20]}... ({len(text)} characters)"
-        try:
-            value = convert(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{shown!r} is not {noun}") from None
-        if not valid(value):
-            raise argparse.ArgumentTypeError(f"{shown} {requirement}")
-        return value
-
-    return parse
-
-
-_positive_int = _number(int, "an integer", lambda v: v >= 1, "must be at least 1")
-_non_negative_int = _number(int, "an integer", lambda v: v >= 0, "must be at least 0")
-# jax.random.key takes a 64-bit signed integer.
-_seed = _number(
-    int,
-    "an integer",
-    lambda v: -(2**63) <= v < 2**63,
-    "is not a 64-bit integer (-2^63 to 2^63-1)",
-)
-# The demo simulates 10 cycles of 2 ramps: at most 10^6 samples, as a protocol file.
-MAX_SAMPLES_PER_RAMP = 50_000
-_samples_per_ramp = _number(
-    int,
-    "an integer",
-    lambda v: 2 <= v <= MAX_SAMPLES_PER_RAMP,
-    f"must be from 2 to {MAX_SAMPLES_PER_RAMP:,}",
-)
-_positive_float = _number(
-    float,
-    "a number",
-    lambda v: math.isfinite(v) and v > 0,
-    "must be a positive number",
-)
 
 
 def _add_model_options(parser, params_help: str) -> None:
