@@ -3,6 +3,7 @@ model; the discovery's terms with state integrate what the model integrates; a
 diverging candidate is flagged, not ranked."""
 
 import dataclasses
+import functools
 import json
 
 import numpy as np
@@ -56,13 +57,17 @@ def _two_causes(seed=3):
     return tests
 
 
-@pytest.fixture(scope="module")
-def two_causes():
+@functools.cache
+def _diagnosed():
     tests = _two_causes()
-    return tests, jc.diagnose(
-        tests,
-        candidates=["stress_nonlinear_creep", "termination_compliance", "sensor_drift"],
-    )
+    return tests, jc.diagnose(tests, candidates=CANDIDATES)
+
+
+@pytest.fixture
+def two_causes():
+    # Cached per process, not per module: the suite's ordering may interleave this
+    # file's tests with others', which would tear a module fixture down and rerun it.
+    return _diagnosed()
 
 
 @pytest.mark.slow
