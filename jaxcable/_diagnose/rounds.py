@@ -23,15 +23,12 @@ before them gave.
 import dataclasses
 from collections.abc import Sequence
 
-import equinox as eqx
-import jax
-import jax.numpy as jnp
-
 from .._models import COVARIATE_EXTENSIONS, EXTENSIONS, AbstractCableModel
 from .._progress import AbstractProgressMeter
 from .base import fit_base
 from .catalogue import score_catalogue
 from .covariates import covariate_candidates
+from .library import base_start
 from .outcome import conclude, verdict
 from .plan import Plan, choose_candidates
 from .prune import Pruned, prune
@@ -132,10 +129,7 @@ def next_base(base: RoundBase, cause: Candidate) -> RoundBase:
     """The base of the next round: the model of `cause`'s fit (per-test values
     averaged), its fitted parameters free."""
     fit = cause.fit
-    model = jax.tree_util.tree_map(
-        lambda x: jnp.mean(x) if eqx.is_inexact_array(x) and x.ndim else x,
-        fit.model,
-    )
+    model = base_start(fit)
     names = tuple(dict.fromkeys(n.split("[")[0] for n in fit.names))
     covariate = cause.covariate or base.covariate
     # A covariate's candidate is tried once per form: `mechano_sorptive[h]` named,
