@@ -20,7 +20,7 @@ def _trajectory(force, elongation, mask=None, length=0.3):
         force=force,
         strain=strain,
         elongation=elongation,
-        parts=jc.StrainParts(strain, zero, zero, zero),
+        parts=jc.StrainParts(strain, zero, zero, zero, zero),
         mask=mask,
         result=jc.RESULTS.successful,
     )

@@ -364,6 +364,21 @@ def test_two_nested_add_up():
     )
 
 
+def test_a_material_effect_never_scales_the_drift():
+    # The drift is the instrument's (the apparatus part), so a stress-dependent creep
+    # leaves it alone in either nesting: the rounds of the diagnosis nest the causes
+    # in the order they find them, not the order the data were made in.
+    outside = StressNonlinearCreep(SensorDrift(BASE, drift_rate=2e-9), n=0.7)
+    inside = SensorDrift(StressNonlinearCreep(BASE, n=0.7), drift_rate=2e-9)
+    a, b = _simulate(outside), _simulate(inside)
+    np.testing.assert_allclose(a.elongation, b.elongation, rtol=1e-12, atol=1e-15)
+    drift = SensorDrift(BASE, drift_rate=2e-9)
+    np.testing.assert_allclose(
+        _simulate(drift).apparatus * CABLE.length, 2e-9 * (TIME - TIME[0]), rtol=1e-9
+    )
+    np.testing.assert_array_equal(_simulate(drift).creep, _simulate(BASE).creep)
+
+
 def _cables(lengths, temperatures):
     n = len(lengths)
     return jc.Cable(

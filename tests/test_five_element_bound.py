@@ -186,6 +186,7 @@ def _unbounded_sum(loading, unloading):
         creep=q_L2 + q_L3,
         recovery_short=-q_UL2,
         recovery_long=-q_UL3,
+        apparatus=jnp.zeros_like(q_L2),
     )
 
 

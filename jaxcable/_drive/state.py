@@ -24,8 +24,8 @@ class Trajectory(eqx.Module):
     - `force`: cable force, N.
     - `strain`: total strain (elongation / L0), dimensionless.
     - `elongation`: elongation, m.
-    - `parts`: the strain split into instantaneous, creep and short- and long-term
-        recovery ([`jaxcable.StrainParts`][]).
+    - `parts`: the strain split into instantaneous, creep, short- and long-term
+        recovery and the apparatus's part ([`jaxcable.StrainParts`][]).
     - `mask`: False at padding samples (their values repeat the last valid sample).
     - `result`: a [`jaxcable.RESULTS`][]: `successful`, or the first failure.
     """
@@ -53,6 +53,10 @@ class Trajectory(eqx.Module):
     @property
     def recovery_long(self):
         return self.parts.recovery_long
+
+    @property
+    def apparatus(self):
+        return self.parts.apparatus
 
 
 class CableState(eqx.Module):
@@ -233,5 +237,5 @@ def commit(
     )
     # Padding samples repeat the last strain; its split is not needed bit-exact.
     z = jnp.zeros_like(parts.instantaneous)
-    old_parts = StrainParts(state.strain, z, z, z)
+    old_parts = StrainParts(state.strain, z, z, z, z)
     return select(mask, new, state), select(mask, parts, old_parts)

@@ -32,9 +32,9 @@ theirs by defining them), so complete once `jaxcable` is imported."""
 class StrainParts(eqx.Module):
     """The strain of one sample split by mechanism (dimensionless, elongation / L0).
 
-    `total = instantaneous + creep - recovery_short - recovery_long`. Recovery terms are
-    reported as positive amounts removed from the strain. Models fill the parts they
-    have and leave the others zero.
+    `total = instantaneous + creep - recovery_short - recovery_long + apparatus`.
+    Recovery terms are reported as positive amounts removed from the strain. Models
+    fill the parts they have and leave the others zero.
 
     **Fields:**
 
@@ -46,18 +46,27 @@ class StrainParts(eqx.Module):
         Kelvin-Voigt element of the five-element model).
     - `recovery_long`: long-term recovery (Park Eq. 7; the second unloading
         Kelvin-Voigt element of the five-element model).
+    - `apparatus`: what the instrument adds to the measured elongation, not the
+        cable's own strain ([`jaxcable.SensorDrift`][]). Kept apart so that an effect
+        of the material (a stress-dependent creep) never scales it, in whichever
+        order the extensions are nested.
     """
 
     instantaneous: Float[Array, "*shape"]
     creep: Float[Array, "*shape"]
     recovery_short: Float[Array, "*shape"]
     recovery_long: Float[Array, "*shape"]
+    apparatus: Float[Array, "*shape"]
 
     @property
     def total(self) -> Float[Array, "*shape"]:
         """Total strain, dimensionless."""
         return (
-            self.instantaneous + self.creep - self.recovery_short - self.recovery_long
+            self.instantaneous
+            + self.creep
+            - self.recovery_short
+            - self.recovery_long
+            + self.apparatus
         )
 
 
@@ -277,14 +286,18 @@ def add_parts(
     *,
     instantaneous: Float[Array, ""] | None = None,
     creep: Float[Array, ""] | None = None,
+    apparatus: Float[Array, ""] | None = None,
 ) -> StrainParts:
-    """`parts` with an extension's strain added to its instantaneous or creep part."""
+    """`parts` with an extension's strain added to its instantaneous, creep or
+    apparatus part."""
     if instantaneous is not None:
         parts = eqx.tree_at(
             lambda p: p.instantaneous, parts, parts.instantaneous + instantaneous
         )
     if creep is not None:
         parts = eqx.tree_at(lambda p: p.creep, parts, parts.creep + creep)
+    if apparatus is not None:
+        parts = eqx.tree_at(lambda p: p.apparatus, parts, parts.apparatus + apparatus)
     return parts
 
 

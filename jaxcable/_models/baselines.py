@@ -58,7 +58,7 @@ class HookeModel(AbstractCableModel[HookeState]):
     ) -> tuple[HookeState, StrainParts]:
         strain = force / (self.E * cable.area)
         zero = jnp.zeros_like(strain)
-        return state, StrainParts(strain, zero, zero, zero)
+        return state, StrainParts(strain, zero, zero, zero, zero)
 
 
 # ----------------------------------------------------------------------------------
@@ -135,7 +135,7 @@ class BurgersModel(AbstractCableModel[BurgersState]):
         )
         dashpot = state.dashpot + 0.5 * (state.stress + stress) * dt / self.eta0
         zero = jnp.zeros_like(stress)
-        parts = StrainParts(stress / self.E1, kelvin_voigt + dashpot, zero, zero)
+        parts = StrainParts(stress / self.E1, kelvin_voigt + dashpot, zero, zero, zero)
         return BurgersState(stress, kelvin_voigt, dashpot), parts
 
 
@@ -397,4 +397,6 @@ class BoucWenModel(AbstractCableModel[BoucWenState]):
         centre = play(state.centre, stress, self.band)
         strain = stress / self.E + self.z_y * (self.A * stress / self.sigma_y - zeta)
         zero = jnp.zeros_like(strain)
-        return BoucWenState(stress, zeta, centre), StrainParts(strain, zero, zero, zero)
+        return BoucWenState(stress, zeta, centre), StrainParts(
+            strain, zero, zero, zero, zero
+        )

@@ -359,6 +359,7 @@ class IntegratedModel(AbstractCableModel[IntegratedState]):
             creep=permanent + short_max + long_max + flow,
             recovery_short=short_max - short,
             recovery_long=long_max - long,
+            apparatus=jnp.zeros_like(inst),
         )
         new_state = IntegratedState(
             force=force,

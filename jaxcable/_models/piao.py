@@ -179,6 +179,7 @@ def superposed_strain(
         creep=q_L2 + q_L3,
         recovery_short=-q_UL2,
         recovery_long=-q_UL3,
+        apparatus=jnp.zeros_like(q_L2),
     )
     added = spring_L + unbounded.creep
     removed = unbounded.recovery_short + unbounded.recovery_long - spring_UL
@@ -198,6 +199,7 @@ def superposed_strain(
         recovery_long=jnp.where(
             excess, share * unbounded.recovery_long, unbounded.recovery_long
         ),
+        apparatus=unbounded.apparatus,
     )
 
 

@@ -175,9 +175,10 @@ class SensorDrift(AbstractExtension[SensorDriftState]):
         delta(t) = r (t - t0)  (m),   eps_drift = delta / L0,
 
     with t0 the start of the record (the state's elapsed time starts at 0 and adds
-    every step's dt). It is added to the creep part (the time-dependent part it is
-    confused with). r takes either sign; 0 is the base exactly. It depends on time
-    only, not on the force.
+    every step's dt). It is the apparatus part of the strain (the instrument's, not
+    the cable's: an extension of the material never scales it, wherever it is
+    nested). r takes either sign; 0 is the base exactly. It depends on time only, not
+    on the force.
 
     **Fields:**
 
@@ -208,4 +209,4 @@ class SensorDrift(AbstractExtension[SensorDriftState]):
         base_state, parts = self.base.advance(state.base, cable, dt, force, direction)
         elapsed = state.elapsed + dt
         drift = self.drift_rate * elapsed / cable.length
-        return SensorDriftState(base_state, elapsed), add_parts(parts, creep=drift)
+        return SensorDriftState(base_state, elapsed), add_parts(parts, apparatus=drift)

@@ -283,7 +283,8 @@ class DiscoveredTerm(AbstractExtension[DiscoveredTermState]):
         )
         c_start = jnp.where(state.started, state.c_start, covariate)
         memory, added = state.memory, strain
-        base_strain = parts.total
+        # The cable's strain: a damage never scales what the instrument adds.
+        base_strain = parts.total - parts.apparatus
         for k, t in enumerate(self.terms):
             if t not in MEMORY_TERMS:
                 continue
