@@ -228,3 +228,34 @@ def test_memory_terms_round_trip_through_params_json():
     assert back.terms == model.terms and float(back.rate1) == pytest.approx(0.02)
     with pytest.raises(ValueError, match="terms"):
         jc.DiscoveredTerm(jc.IntegratedModel(), terms=("relax_nothing",))
+
+
+def test_an_unused_covariate_beside_a_residual_asks_for_the_discovery():
+    from types import SimpleNamespace as S
+
+    from jaxcable._diagnose.rounds import _named_unless_beaten, _unused_channel
+    from jaxcable._diagnose.verdict import Verdict
+
+    plan, base = S(columns=("humidity_pct",)), S(covariate=None)
+    named = Verdict("named", 0, (90.0,))
+
+    def found(rmse, covariate=None):
+        return (S(heldout_rmse=rmse, covariate=covariate),)
+
+    # A known cause at 1.4 x the noise, the humidity read by nothing: look.
+    assert _unused_channel(plan, base, found(1.4), named, 1.0)
+    # Read by the cause or the base, within 1.2 x the noise, no column, or nothing
+    # named: no.
+    assert not _unused_channel(plan, base, found(1.4, "humidity_pct"), named, 1.0)
+    assert not _unused_channel(
+        plan, S(covariate="humidity_pct"), found(1.4), named, 1.0
+    )
+    assert not _unused_channel(plan, base, found(1.1), named, 1.0)
+    assert not _unused_channel(S(columns=()), base, found(1.4), named, 1.0)
+    assert not _unused_channel(plan, base, found(1.4), Verdict("none", None, ()), 1.0)
+    # The term is named instead only 5 % below the cause.
+    after = Verdict("named", 1, (90.0, 99.0))
+    better = found(1.4) + (S(heldout_rmse=1.0),)
+    assert _named_unless_beaten(named, after, better) == after
+    close = found(1.4) + (S(heldout_rmse=1.36),)
+    assert _named_unless_beaten(named, after, close).named == 0

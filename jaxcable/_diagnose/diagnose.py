@@ -91,7 +91,10 @@ def diagnose(
     base; it becomes the candidate `"discovered"`, scored like the others (same
     held-out samples, BIC, size = its best-determined coefficient), and is named
     (`named_cause="discovered"`, the equation in `Diagnosis.discovered`) when it is
-    significant and sufficient. It runs on the time split of force-driven tests.
+    significant and sufficient. It runs on the time split of force-driven tests. It
+    runs too when the named cause reads none of the recorded covariates and leaves
+    more than `MIN_EXCESS` x the noise; the term is then named instead only when its
+    held-out RMSE is `MIN_GAIN_PCT` % lower (`jaxcable._diagnose.rounds`).
 
     **Drives.** As in [`jaxcable.fit`][], a force-controlled test is driven by its
     force and scored on its elongation, a displacement-controlled one (relaxation, a
@@ -132,7 +135,8 @@ def diagnose(
         from its data), a drive ([`jaxcable.FORCE_DRIVEN`][],
         [`jaxcable.ELONGATION_DRIVEN`][]) or its name, or one of these per test.
     - `discover`: look for a discovered term: None (default) when the verdict would
-        be `"unexplained"`, True always, False never.
+        be `"unexplained"` (or a covariate is unused, above), True always, False
+        never.
     - `max_rounds`: the most rounds (causes) to look for, >= 1 (1: stop after the
         first cause).
 

@@ -18,6 +18,13 @@ starts with a known cause is confirmed by known causes only (a discovered term
 fitted after a wrong partial cause absorbs what it got wrong). Otherwise they
 are reported as tried (`accepted` False) and the verdict stays what the rounds
 before them gave.
+
+A round whose named cause reads none of the covariates the data record while it
+leaves more than `MIN_EXCESS` x the noise runs the discovery as well (an unused
+measured channel beside a residual above the noise is a lead: an extra Kelvin
+element comes within 2 x the noise of a mechano-sorptive creep that saturates). The
+discovered term is named instead only when its held-out RMSE is `MIN_GAIN_PCT` %
+below the named cause's.
 """
 
 import dataclasses
@@ -35,7 +42,7 @@ from .prune import Pruned, prune
 from .result import Candidate, Diagnosis
 from .scoring import noise_floor
 from .stage import discovery_stage
-from .verdict import MAX_FLOOR_RATIO, sufficient
+from .verdict import MAX_FLOOR_RATIO, MIN_EXCESS, MIN_GAIN_PCT, Verdict, sufficient
 
 
 @dataclasses.dataclass(frozen=True)
@@ -93,19 +100,44 @@ def one_round(
     noise = noise_floor(plan.tests, plan.how)
     decision = verdict(fitted, noise, found)
     discovered = None
-    wanted = (
-        decision.verdict == "unexplained"
-        if options["discover"] is None
-        else options["discover"]
-    )
-    if wanted and plan.on_time_split_in_mm:
+    auto = options["discover"] is None
+    wanted = decision.verdict == "unexplained" if auto else options["discover"]
+    unused = auto and _unused_channel(plan, base, found, decision, noise)
+    if (wanted or unused) and plan.on_time_split_in_mm:
         discovered = discovery_stage(
             plan, fitted, max_steps=max_steps, progress_meter=meter
         )
         if discovered is not None:
+            before = decision
             found += (discovered.candidate,)
             decision = verdict(fitted, noise, found)
+            if unused:
+                decision = _named_unless_beaten(before, decision, found)
     return conclude(plan, base.label, fitted, found, decision, noise, discovered), plan
+
+
+def _unused_channel(plan: Plan, base: RoundBase, found, decision: Verdict, noise):
+    """Whether `decision` names a cause that reads none of the recorded covariates
+    (nor does the base) and leaves more than `MIN_EXCESS` x `noise` held out."""
+    if decision.verdict != "named":
+        return False
+    named = found[decision.named]
+    read = {base.covariate, named.covariate}
+    unused = [c for c in plan.columns if c not in read]
+    return bool(unused) and named.heldout_rmse > MIN_EXCESS * noise
+
+
+def _named_unless_beaten(before: Verdict, after: Verdict, found) -> Verdict:
+    """`after` (the verdict with the discovered term, last of `found`) when it names
+    the term and the term's held-out RMSE is `MIN_GAIN_PCT` % below that of the
+    cause `before` named; else `after` naming that cause."""
+    term, named = found[-1], found[before.named]
+    if (
+        after.named == len(found) - 1
+        and term.heldout_rmse <= (1.0 - MIN_GAIN_PCT / 100.0) * named.heldout_rmse
+    ):
+        return after
+    return after._replace(verdict=before.verdict, named=before.named)
 
 
 def partial_cause(d: Diagnosis) -> Candidate | None:
