@@ -23,8 +23,6 @@ from jaxcable._fit import model_responses
 from jaxcable._fit.serialize import model_document, model_from_document
 
 
-pytestmark = pytest.mark.xdist_group("rounds")
-
 # A drift of the extensometer (0.1 mm/h) and a compliant termination (2 um/N) at
 # once, on two lengths: neither alone explains the data.
 DRIFT, COMPLIANCE = 0.1e-3 / 3600, 2e-6
