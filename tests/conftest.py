@@ -149,6 +149,10 @@ SLOW_FIRST = (
     "tests/test_diagnose.py",  # 190 s
     "tests/test_jax_contract.py",  # 200 s before its gradient tests were jitted
     "tests/test_diagnose_drive.py",  # about 100 s
+    "tests/test_rounds.py",  # 84 s, most of it one diagnosis
+    "tests/test_two_pass.py",  # 68 s
+    "tests/test_cpu_loops.py",  # two fresh interpreters: 58 s
+    "tests/test_extensions.py",  # 52 s
     "tests/test_drive.py",  # about 60 s
     "tests/test_fit.py",  # 115 s
     "tests/test_notebooks.py::test_notebook_runs[05_cdpr.ipynb]",  # 75 s
