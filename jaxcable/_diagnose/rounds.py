@@ -219,6 +219,7 @@ def diagnose_rounds(
     plans: list[Plan] = []
     kept = 0  # the rounds whose causes are kept
     pending = None  # the round of a partial cause not yet confirmed
+    final = None  # (plan, fit, held-out RMSE) of a round whose base has every cause
     for k in range(max_rounds):
         if k:
             progress_meter.say(f"round {k + 1}: base {base.label}")
@@ -229,6 +230,16 @@ def diagnose_rounds(
         if cause is None and k + 1 < max_rounds:
             partial = partial_cause(d)
         if cause is None and partial is None:
+            if d.verdict == "none" and k and (pending is not None or kept == k):
+                # Refitted together, the causes so far leave only the noise (the
+                # last candidate's own fit can stop short of that): this round's
+                # base confirms a pending chain, and is the final model.
+                start = rounds[0 if pending is None else pending]
+                if (pending is None or _known_chain(rounds, pending)) and sufficient(
+                    start.base_heldout_rmse, d.base_heldout_rmse, start.noise
+                ):
+                    pending, kept = None, k
+                    final = (plan, d.base_fit, d.base_heldout_rmse)
             rounds.append(d)
             break
         cause = cause or partial
@@ -239,14 +250,7 @@ def diagnose_rounds(
             pending = k if pending is None else pending
         elif pending is not None:
             start = rounds[pending]
-            # A known partial cause is confirmed by known causes only: a discovered
-            # term fitted after it can absorb whatever the partial cause got wrong
-            # (a slipping clamp read as a sensor drift, then "completed").
-            known = (
-                all(r.named_cause != "discovered" for r in rounds[pending:])
-                or rounds[pending].named_cause == "discovered"
-            )
-            if known and sufficient(
+            if _known_chain(rounds, pending) and sufficient(
                 start.base_heldout_rmse, cause.heldout_rmse, start.noise
             ):
                 pending, kept = None, k + 1
@@ -274,13 +278,27 @@ def diagnose_rounds(
         plan = dataclasses.replace(
             plan, how=plan.how._replace(covariate=cause.covariate or plan.how.covariate)
         )
+        fit, heldout = cause.fit, cause.heldout_rmse
+        if final is not None:
+            plan, fit, heldout = final
         if kept > 1:
             progress_meter.say("trying each earlier cause out of the final model")
-        pruned = prune(plan, cause.fit, cause.heldout_rmse, kept, options)
+        pruned = prune(plan, fit, heldout, kept, options)
         for i, note in enumerate(pruned.notes):
             if note:
                 rounds[i] = dataclasses.replace(rounds[i], accepted=False, note=note)
     return _combined(rounds, kept, pruned)
+
+
+def _known_chain(rounds: list[Diagnosis], pending: int) -> bool:
+    """Whether the chain of causes from round `pending` on may be confirmed: a known
+    partial cause is confirmed by known causes only (a discovered term fitted after
+    it can absorb whatever it got wrong: a slipping clamp read as a sensor drift,
+    then "completed")."""
+    return (
+        all(r.named_cause != "discovered" for r in rounds[pending:])
+        or rounds[pending].named_cause == "discovered"
+    )
 
 
 def _with_cause(d: Diagnosis, cause: Candidate) -> Diagnosis:
