@@ -47,6 +47,7 @@ from .verdict import (
     MAX_FLOOR_RATIO,
     MIN_EXCESS,
     MIN_GAIN_PCT,
+    MIN_PARTIAL_GAIN_PCT,
     Verdict,
     sufficient,
 )
@@ -150,7 +151,7 @@ def _named_unless_beaten(before: Verdict, after: Verdict, found) -> Verdict:
 def partial_cause(d: Diagnosis) -> Candidate | None:
     """The cause a round that named nothing though its base is above the noise goes
     on with: its significant catalogue or covariate candidate of largest held-out
-    gain, else one whose held-out gain (>= 2 `MIN_GAIN_PCT`) and ΔBIC support it
+    gain, else one whose held-out gain (>= `MIN_PARTIAL_GAIN_PCT`) and ΔBIC support it
     though its size is within 3 standard errors of 0, else a significant
     discovered term (the discovery is the last resort, as
     in a round: a term fitted to two effects at once stands in for both and leaves
@@ -171,7 +172,7 @@ def partial_cause(d: Diagnosis) -> Candidate | None:
             for c in fitted
             if c.id != "discovered"
             and c.applicable
-            and c.gain_pct >= 2.0 * MIN_GAIN_PCT
+            and c.gain_pct >= MIN_PARTIAL_GAIN_PCT
             and c.delta_bic <= MAX_DELTA_BIC
         ]
     return max(known or able, key=lambda c: c.gain_pct, default=None)

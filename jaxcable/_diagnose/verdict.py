@@ -56,6 +56,9 @@ from typing import NamedTuple
 MIN_GAIN_PCT = 5.0
 MAX_DELTA_BIC = -10.0
 MIN_SIZE_Z = 3.0
+# The held-out gain, %, of a known candidate a round may go on with when its size is
+# within MIN_SIZE_Z standard errors (`jaxcable._diagnose.rounds.partial_cause`).
+MIN_PARTIAL_GAIN_PCT = 2.0 * MIN_GAIN_PCT
 # Nothing is named while the base already predicts the held-out data to within 20 % of
 # the noise level estimated from the data: what is left is noise, and a candidate that
 # "explains" it is fitting the noise's realisation (measured: a 10 J/mol activation
