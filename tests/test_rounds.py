@@ -195,22 +195,39 @@ def test_memory_terms_integrate_their_columns(humid_test, term, rate, theta):
         np.asarray(model_responses(model, [t], drive="force", covariate="h")[0]) / 0.3
         - strain
     )
-    column = memory_library(t, "h", strain, [(term, rate)])[(term, rate)]
+    column = memory_library(t, "h", strain, [(term, rate, 0.0)])[(term, rate, 0.0)]
     assert np.max(np.abs(added)) > 1e-6
     np.testing.assert_allclose(added, theta * column, rtol=1e-9, atol=1e-12)
 
 
-def test_a_damage_scales_the_base_strain(humid_test):
+@pytest.mark.parametrize(
+    "term, theta, accel",
+    [
+        ("damage_cycles", 1e-3, 0.0),
+        ("damage_cycles", 1e-3, 0.05),
+        ("compliance_time", 1e-15, 2e-4),
+    ],
+)
+def test_a_damage_scales_the_base_strain_or_the_stress(humid_test, term, theta, accel):
     base, t, strain = humid_test
-    model = jc.DiscoveredTerm(base, terms=("damage_cycles",), theta0=1e-3, rate0=2.0)
+    model = jc.DiscoveredTerm(
+        base, terms=(term,), theta0=theta, rate0=2.0, accel0=accel
+    )
     added = np.asarray(model_responses(model, [t], drive="force")[0]) / 0.3 - strain
-    column = memory_library(t, None, strain, [("damage_cycles", 2.0)])[
-        ("damage_cycles", 2.0)
-    ]
-    # D / (1 - D) = D + D^2 + ...: the column is the first order.
-    d = 1e-3 * column / np.where(strain > 0, strain, 1.0)
-    np.testing.assert_allclose(added, strain * d / (1 - d), rtol=1e-6, atol=1e-12)
-    assert np.all(added >= 1e-3 * column - 1e-15)
+    key, flat = (term, 2.0, accel), (term, 2.0, 0.0)
+    columns = memory_library(t, None, strain, [key, flat])
+    column, linear = columns[key], columns[flat]
+    np.testing.assert_allclose(added, theta * column, rtol=1e-9, atol=1e-15)
+    # x I / (1 - a I), x the base's strain or the stress: the acceleration runs the
+    # strain away from I's line.
+    stress = np.asarray(t.force) / float(t.cable().area)
+    scaled = strain if term.startswith("damage") else stress
+    scaled = np.where(scaled > 0, scaled, 1.0)
+    integral = linear / scaled
+    np.testing.assert_allclose(
+        column, linear / (1 - np.minimum(accel * integral, 0.9)), rtol=1e-9
+    )
+    assert np.all(column >= linear) and np.any(column > 1.1 * linear) == (accel > 0)
 
 
 def test_memory_terms_round_trip_through_params_json():
@@ -222,16 +239,22 @@ def test_memory_terms_round_trip_through_params_json():
         rate1=0.02,
     )
     assert model.used_fields() == ("theta0", "theta1", "rate1")
+    damage = jc.DiscoveredTerm(
+        jc.IntegratedModel(), terms=("damage_time",), theta0=1e-6, accel0=1e-5
+    )
+    assert damage.used_fields() == ("theta0",)
     back = model_from_document(json.loads(json.dumps(model_document(model))))
     assert back.terms == model.terms and float(back.rate1) == pytest.approx(0.02)
+    back = model_from_document(json.loads(json.dumps(model_document(damage))))
+    assert float(back.accel0) == pytest.approx(1e-5)
     with pytest.raises(ValueError, match="terms"):
         jc.DiscoveredTerm(jc.IntegratedModel(), terms=("relax_nothing",))
 
 
-def test_an_unused_covariate_beside_a_residual_asks_for_the_discovery():
+def test_a_residual_beside_an_unused_or_memoryless_covariate_asks_for_the_discovery():
     from types import SimpleNamespace as S
 
-    from jaxcable._diagnose.rounds import _named_unless_beaten, _unused_channel
+    from jaxcable._diagnose.rounds import _discovery_may_beat, _named_unless_beaten
     from jaxcable._diagnose.verdict import Verdict
 
     plan, base = S(columns=("humidity_pct",)), S(covariate=None)
@@ -241,16 +264,20 @@ def test_an_unused_covariate_beside_a_residual_asks_for_the_discovery():
         return (S(heldout_rmse=rmse, covariate=covariate),)
 
     # A known cause at 1.4 x the noise, the humidity read by nothing: look.
-    assert _unused_channel(plan, base, found(1.4), named, 1.0)
-    # Read by the cause or the base, within 1.2 x the noise, no column, or nothing
-    # named: no.
-    assert not _unused_channel(plan, base, found(1.4, "humidity_pct"), named, 1.0)
-    assert not _unused_channel(
+    assert _discovery_may_beat(plan, base, found(1.4), named, 1.0)
+    # A covariate form (no memory) at 1.4 x the noise: look for one with memory.
+    assert _discovery_may_beat(plan, base, found(1.4, "humidity_pct"), named, 1.0)
+    # Read by the base and the cause one without it, within 1.2 x the noise, no
+    # column, or nothing named: no.
+    assert not _discovery_may_beat(plan, base, found(1.1, "humidity_pct"), named, 1.0)
+    assert not _discovery_may_beat(
         plan, S(covariate="humidity_pct"), found(1.4), named, 1.0
     )
-    assert not _unused_channel(plan, base, found(1.1), named, 1.0)
-    assert not _unused_channel(S(columns=()), base, found(1.4), named, 1.0)
-    assert not _unused_channel(plan, base, found(1.4), Verdict("none", None, ()), 1.0)
+    assert not _discovery_may_beat(plan, base, found(1.1), named, 1.0)
+    assert not _discovery_may_beat(S(columns=()), base, found(1.4), named, 1.0)
+    assert not _discovery_may_beat(
+        plan, base, found(1.4), Verdict("none", None, ()), 1.0
+    )
     # The term is named instead only 5 % below the cause.
     after = Verdict("named", 1, (90.0, 99.0))
     better = found(1.4) + (S(heldout_rmse=1.0),)

@@ -92,9 +92,10 @@ def diagnose(
     held-out samples, BIC, size = its best-determined coefficient), and is named
     (`named_cause="discovered"`, the equation in `Diagnosis.discovered`) when it is
     significant and sufficient. It runs on the time split of force-driven tests. It
-    runs too when the named cause reads none of the recorded covariates and leaves
-    more than `MIN_EXCESS` x the noise; the term is then named instead only when its
-    held-out RMSE is `MIN_GAIN_PCT` % lower (`jaxcable._diagnose.rounds`).
+    runs too when the named cause leaves more than `MIN_EXCESS` x the noise and
+    reads none of the recorded covariates, or reads one through a covariate form
+    (without memory); the term is then named instead only when its held-out RMSE
+    is `MIN_GAIN_PCT` % lower (`jaxcable._diagnose.rounds`).
 
     **Drives.** As in [`jaxcable.fit`][], a force-controlled test is driven by its
     force and scored on its elongation, a displacement-controlled one (relaxation, a

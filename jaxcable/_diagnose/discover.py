@@ -27,6 +27,7 @@ from .._fit import (
 from .._models import AbstractCableModel
 from .heldout import heldout_start
 from .library import (
+    ACCEL_FIELDS,
     COVARIATE_TERMS,
     MAX_TERMS,
     MEMORY_TERMS,
@@ -34,14 +35,18 @@ from .library import (
     TERMS,
     THETA_FIELDS,
     DiscoveredTerm,
+    accel_grid,
+    accel_unit,
     base_fit_names,
     base_start,
     covariate_in,
+    damage_integral,
     library,
     memory_equation,
     memory_library,
     rate_grid,
     sensitivities,
+    step_inputs,
     theta_unit,
 )
 from .scoring import force_scoring
@@ -72,9 +77,12 @@ class DiscoveryResult:
     - `heldout_rmse_mm`: `(base, discovered)` RMSE on the held-out samples, mm.
     - `gain_pct`: 100 (1 - discovered / base) of the held-out RMSE.
     - `path`: `(terms, held-out RMSE of the residual, mm)` of every support the
-        thresholds gave, the empty one first (a term with memory as `term@rate`).
+        thresholds gave, the empty one first (a term with memory as `term@rate`, a
+        damage as `term@b,a=a`).
     - `rates`: each term's rate k or exponent b (terms with memory), NaN for the
         stateless ones.
+    - `accels`: each damage's acceleration a (0 for the other terms with memory,
+        NaN for the stateless ones).
     - `support`: the chosen support as it appears in `path`.
     """
 
@@ -91,6 +99,7 @@ class DiscoveryResult:
     gain_pct: float
     path: tuple[tuple[tuple[str, ...], float], ...]
     rates: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))
+    accels: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))
     support: tuple[str, ...] = ()
 
     def describe(self) -> dict[str, Any]:
@@ -105,6 +114,7 @@ class DiscoveryResult:
             "stderr": [float(s) for s in self.stderr],
             "units": list(self.units),
             "rates": [float(r) for r in self.rates],
+            "accels": [float(a) for a in self.accels],
             "heldout_rmse_mm": [float(x) for x in self.heldout_rmse_mm],
             "gain_pct": float(self.gain_pct),
         }
@@ -121,18 +131,21 @@ class DiscoveryResult:
         return values[k], errors[k], self.units[k], f"theta{k} ({self.terms[k]})"
 
 
-def _equation(terms, values, stderr, covariate, rates) -> str:
+def _equation(terms, values, stderr, covariate, rates, accels) -> str:
     """`d(eps)/dt = v (+-se) unit * symbol + ...` (`0` without terms), then each
     term with memory as `eps += ...` with its state's equation."""
     name = covariate or "c"
     parts, states = [], []
-    for t, v, se, rate in zip(terms, values, stderr, rates):
+    for t, v, se, rate, accel in zip(terms, values, stderr, rates, accels):
         err = f" (+-{se:.2g})" if math.isfinite(se) else ""
         value = f"{v:.3g}{err} {theta_unit(t, f'[{name}]')}"
         if t in MEMORY_TERMS:
             rate_unit = covariate_in(MEMORY_TERMS[t][2], f"[{name}]")
             rate_text = f"{rate:.3g}" + ("" if rate_unit == "-" else f" {rate_unit}")
-            states.append("eps += " + memory_equation(t, value, rate_text, name))
+            accel_text = f"{accel:.3g} {accel_unit(t)}" if accel else "0"
+            states.append(
+                "eps += " + memory_equation(t, value, rate_text, name, accel_text)
+            )
             continue
         symbol = TERMS[t][0].replace("c", name) if t in COVARIATE_TERMS else TERMS[t][0]
         parts.append(f"{value} * {symbol}")
@@ -244,12 +257,27 @@ def discover(
         if covariate is not None
         else 1.0
     )
+    # A damage enters at every acceleration of its grid too, scaled by the largest
+    # damage integral of the tests (their recorded loads, not their elongations).
+    steps = [step_inputs(t, covariate) for t in tests]
     keys = [
-        (t, r) for t in wanted if t in MEMORY_TERMS for r in rate_grid(t, variation)
+        (t, r, a)
+        for t in wanted
+        if t in MEMORY_TERMS
+        for r in rate_grid(t, variation)
+        for a in accel_grid(
+            t,
+            max(float(damage_integral(x, t, r)[-1]) for x in steps)
+            if MEMORY_TERMS[t][3] == "damage"
+            else 1.0,
+        )
     ]
-    labels = names + tuple(f"{t}@{r:.3g}" for t, r in keys)
-    kind = [*names, *(t for t, _ in keys)]
-    rate_of = [math.nan] * len(names) + [r for _, r in keys]
+    labels = names + tuple(
+        f"{t}@{r:.3g}" + (f",a={a:.3g}" if a else "") for t, r, a in keys
+    )
+    kind = [*names, *(t for t, _, _ in keys)]
+    rate_of = [math.nan] * len(names) + [r for _, r, _ in keys]
+    accel_of = [math.nan] * len(names) + [a for _, _, a in keys]
 
     base = base_start(base_fit)
     shared, per = base_fit_names(base_fit)
@@ -327,6 +355,7 @@ def discover(
     chosen = tuple(kind[i] for i in index)
     coefficients = np.array([coef[i] for i in index])
     rates = np.array([rate_of[i] for i in index])
+    accels = np.array([accel_of[i] for i in index])
     units = tuple(theta_unit(t, f"[{covariate or 'c'}]") for t in chosen)
     report_path = tuple((s, v[1]) for s, v in path.items())
 
@@ -334,6 +363,7 @@ def discover(
     thetas.update(
         {RATE_FIELDS[k]: r for k, r in enumerate(rates) if chosen[k] in MEMORY_TERMS}
     )
+    thetas.update({ACCEL_FIELDS[k]: a for k, a in enumerate(accels) if a > 0})
     model = DiscoveredTerm(base, terms=chosen, **thetas) if chosen else base
     result, values = None, coefficients
     stderr = np.full(len(chosen), np.nan)
@@ -352,11 +382,14 @@ def discover(
         values = np.asarray(result.values, float)[index]
         stderr = np.asarray(result.stderr, float)[index]
         model = result.model
-        rates = np.array(
-            [
-                float(getattr(model, RATE_FIELDS[k])) if t in MEMORY_TERMS else math.nan
-                for k, t in enumerate(chosen)
-            ]
+        rates, accels = (
+            np.array(
+                [
+                    float(getattr(model, fields[k])) if t in MEMORY_TERMS else math.nan
+                    for k, t in enumerate(chosen)
+                ]
+            )
+            for fields in (RATE_FIELDS, ACCEL_FIELDS)
         )
     how = force_scoring(tests, covariate)
     base_rmse = how.rmse(base, tests, range(len(tests)), held)
@@ -369,8 +402,9 @@ def discover(
         values=values,
         stderr=stderr,
         units=units,
-        equation=_equation(chosen, values, stderr, covariate, rates),
+        equation=_equation(chosen, values, stderr, covariate, rates, accels),
         rates=rates,
+        accels=accels,
         support=tuple(best),
         covariate=covariate,
         heldout_rmse_mm=(base_rmse, rmse),

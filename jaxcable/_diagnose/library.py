@@ -19,12 +19,15 @@ MAX_TERMS = discovered.MAX_TERMS
 TERMS = discovered.TERMS
 THETA_FIELDS = discovered.THETA_FIELDS
 RATE_FIELDS = discovered.RATE_FIELDS
+ACCEL_FIELDS = discovered.ACCEL_FIELDS
 MEMORY_TERMS = memory.MEMORY_TERMS
 SIGMA_REF = memory.SIGMA_REF
 memory_column = memory.memory_column
 memory_equation = memory.memory_equation
 covariate_in = memory.covariate_in
 rate_grid = memory.rate_grid
+accel_grid = memory.accel_grid
+accel_unit = memory.accel_unit
 DiscoveredTerm = discovered.DiscoveredTerm
 cycle_count = discovered.cycle_count
 term_increments = discovered.term_increments
@@ -114,52 +117,66 @@ def library(test, covariate: str | None, names=tuple(TERMS)) -> dict[str, np.nda
     return {k: np.cumsum(np.asarray(increments[k], float)) for k in names}
 
 
+def _driver_steps(x: dict[str, np.ndarray], driver: str) -> np.ndarray:
+    """The increments of a term's driver over every step of `step_inputs`' `x`."""
+    return {
+        "t": x["dt"],
+        "t_load": x["dt_loaded"],
+        "|dc|": np.abs(x["c1"] - x["c0"]),
+        "N": x["cycles1"] - x["cycles0"],
+    }[driver]
+
+
+def damage_integral(x: dict[str, np.ndarray], term: str, rate: float) -> np.ndarray:
+    """A damage's integral I = integral of (sigma / `SIGMA_REF`)^b dN (or dt) at
+    every sample of a test (b = `rate`), host-side: the recurrence of `memory_step`
+    on the test's [`step_inputs`][] `x`."""
+    load = 0.5 * (
+        (np.maximum(x["sigma0"], 0.0) / SIGMA_REF) ** rate
+        + (np.maximum(x["sigma1"], 0.0) / SIGMA_REF) ** rate
+    )
+    return np.cumsum(load * _driver_steps(x, MEMORY_TERMS[term][5]))
+
+
 def memory_library(
     test, covariate: str | None, base_strain: np.ndarray, keys
-) -> dict[str, np.ndarray]:
+) -> dict[tuple, np.ndarray]:
     """Each term with memory's strain per unit theta along a test, at a fixed rate
-    (to first order in a damage: `memory_column`), host-side: the recurrences of
-    `memory_step` in NumPy.
+    (and for a damage a fixed acceleration; the base's strain held: `memory_column`),
+    host-side: the recurrences of `memory_step` in NumPy.
 
     **Arguments:**
 
     - `test`, `covariate`: as in [`library`][].
-    - `base_strain`: the base model's strain at every sample (a damage scales it).
-    - `keys`: `(term, rate)` pairs ([`MEMORY_TERMS`][] ids).
+    - `base_strain`: the base model's strain at every sample (a `damage_*` scales
+        it; a `compliance_*` scales the stress).
+    - `keys`: `(term, rate, accel)` triples ([`MEMORY_TERMS`][] ids; `accel` is
+        read by the damages only).
 
     **Returns:**
 
-    `{(term, rate): column per sample}`.
+    `{(term, rate, accel): column per sample}`.
     """
     x = step_inputs(test, covariate)
     out = {}
-    for term, rate in keys:
+    for term, rate, accel in keys:
         _, _, _, kind, target, driver = MEMORY_TERMS[term]
-        step = {
-            "t": x["dt"],
-            "t_load": x["dt_loaded"],
-            "|dc|": np.abs(x["c1"] - x["c0"]),
-            "N": x["cycles1"] - x["cycles0"],
-        }[driver]
         if kind == "damage":
-            load = 0.5 * (
-                (np.maximum(x["sigma0"], 0.0) / SIGMA_REF) ** rate
-                + (np.maximum(x["sigma1"], 0.0) / SIGMA_REF) ** rate
-            )
-            q = np.cumsum(load * step)
+            q = damage_integral(x, term, rate)
         else:
             start = x["c1"][0] if target == "c" else 0.0
             goal = 0.5 * (
                 x["sigma0"] + x["sigma1"] if target == "sigma" else x["c0"] + x["c1"]
             )
-            decay = np.exp(-rate * step)
+            decay = np.exp(-rate * _driver_steps(x, driver))
             q = np.empty_like(goal)
             value = start
             for i in range(goal.size):
                 value = goal[i] + (value - goal[i]) * decay[i]
                 q[i] = value
             q = q - start
-        out[(term, rate)] = np.asarray(memory_column(term, q, base_strain), float)
+        column = memory_column(term, q, base_strain, x["sigma1"], accel)
+        out[(term, rate, accel)] = np.asarray(column, float)
     return out
 
 

@@ -19,12 +19,15 @@ fitted after a wrong partial cause absorbs what it got wrong). Otherwise they
 are reported as tried (`accepted` False) and the verdict stays what the rounds
 before them gave.
 
-A round whose named cause reads none of the covariates the data record while it
-leaves more than `MIN_EXCESS` x the noise runs the discovery as well (an unused
-measured channel beside a residual above the noise is a lead: an extra Kelvin
-element comes within 2 x the noise of a mechano-sorptive creep that saturates). The
-discovered term is named instead only when its held-out RMSE is `MIN_GAIN_PCT` %
-below the named cause's.
+A round whose named cause leaves more than `MIN_EXCESS` x the noise runs the
+discovery as well when that cause reads none of the covariates the data record (an
+unused measured channel beside a residual above the noise is a lead: an extra
+Kelvin element comes within 2 x the noise of a mechano-sorptive creep that
+saturates), or reads one through a form without memory (the library's terms with
+state in that covariate, a lag or a saturation, may be what it is: a strain
+proportional to the humidity comes within 2 x the noise of one that lags it by 40
+min). The discovered term is named instead only when its held-out RMSE is
+`MIN_GAIN_PCT` % below the named cause's.
 """
 
 import dataclasses
@@ -110,7 +113,7 @@ def one_round(
     discovered = None
     auto = options["discover"] is None
     wanted = decision.verdict == "unexplained" if auto else options["discover"]
-    unused = auto and _unused_channel(plan, base, found, decision, noise)
+    unused = auto and _discovery_may_beat(plan, base, found, decision, noise)
     if (wanted or unused) and plan.on_time_split_in_mm:
         discovered = discovery_stage(
             plan, fitted, max_steps=max_steps, progress_meter=meter
@@ -124,15 +127,18 @@ def one_round(
     return conclude(plan, base.label, fitted, found, decision, noise, discovered), plan
 
 
-def _unused_channel(plan: Plan, base: RoundBase, found, decision: Verdict, noise):
-    """Whether `decision` names a cause that reads none of the recorded covariates
-    (nor does the base) and leaves more than `MIN_EXCESS` x `noise` held out."""
+def _discovery_may_beat(plan: Plan, base: RoundBase, found, decision: Verdict, noise):
+    """Whether `decision` names a cause that leaves more than `MIN_EXCESS` x `noise`
+    held out and either reads none of the recorded covariates (nor does the base)
+    or reads one through a covariate form (the catalogue's have no memory)."""
     if decision.verdict != "named":
         return False
     named = found[decision.named]
+    if not named.heldout_rmse > MIN_EXCESS * noise:
+        return False
     read = {base.covariate, named.covariate}
     unused = [c for c in plan.columns if c not in read]
-    return bool(unused) and named.heldout_rmse > MIN_EXCESS * noise
+    return bool(unused) or named.covariate is not None
 
 
 def _named_unless_beaten(before: Verdict, after: Verdict, found) -> Verdict:

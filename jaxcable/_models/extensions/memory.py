@@ -14,13 +14,23 @@ at its mean, so the update is exact: q1 = m + (q0 - m) exp(-k dchi). With the dr
 d(eps)/dt = m |dc/dt| (sigma / E_ms - eps) (k = m, theta = 1 / E_ms); with the
 driver t and the target c a covariate strain that lags its covariate by 1/k.
 
-A damage D = theta I, I = integral of (sigma / SIGMA_REF)^b dN (or dt), scales the
-base's strain: eps += eps_base D / (1 - D), D capped at `MAX_DAMAGE` (the strain runs
-away as D grows: fatigue or creep rupture approached). To first order in D the
-strain is theta eps_base I, the column the discovery's regression uses.
+A damage grows with the load history, I = integral of (sigma / SIGMA_REF)^b dN (or
+dt), and scales the base's strain (`damage_*`) or the stress (`compliance_*`: an
+elastic compliance that grows, and leaves with the load):
+
+    eps += theta x I / (1 - D),      D = a I capped at `MAX_DAMAGE`,
+
+with x = eps_base or sigma, so that the strain runs away as the damage D approaches 1 (fatigue or creep
+rupture approached). The amplitude theta and the acceleration a are apart: a
+damage confined to a small part of the cable (a splice, the sections at the
+terminations) softens the whole by little and still runs away. a = 0 is a damage
+linear in I; a = theta is D / (1 - D) of the whole cable (D = theta I).
 
 Each term has one nonlinear parameter, k (1 / unit of the driver) or b (-), in the
-`rate` field of its slot; theta is linear, as for the stateless terms.
+`rate` field of its slot, and a damage a second one, a (1/cycle or 1/s: 1 / the
+unit of I), in its `accel` field; theta is linear, as for the stateless terms, and
+the regression's column is the strain per unit theta at a fixed rate and
+acceleration.
 """
 
 import re
@@ -33,7 +43,7 @@ from ..kernels import safe_pow
 
 # The reference stress of a damage's power law, Pa (10 MPa: a 3 mm cable at 70 N).
 SIGMA_REF = 1e7
-# The largest damage the strain is scaled by: D / (1 - D) <= 9.
+# The largest damage the strain is scaled by: 1 / (1 - D) <= 10.
 MAX_DAMAGE = 0.9
 
 # Each term with state: (equation of its state, unit of theta, unit of its rate,
@@ -66,16 +76,32 @@ MEMORY_TERMS: dict[str, tuple[str, str, str, str, str, str]] = {
     ),
     "relax_c_time": ("dq/dt = k (c - q)", "1/c", "1/s", "relax", "c", "t"),
     "damage_cycles": (
-        "dD/dN = theta (sigma/10 MPa)^b",
+        "dI/dN = (sigma/10 MPa)^b",
         "1/cycle",
+        "-",
+        "damage",
+        "strain",
+        "N",
+    ),
+    "damage_time": (
+        "dI/dt = (sigma/10 MPa)^b",
+        "1/s",
+        "-",
+        "damage",
+        "strain",
+        "t",
+    ),
+    "compliance_cycles": (
+        "dI/dN = (sigma/10 MPa)^b",
+        "1/(Pa cycle)",
         "-",
         "damage",
         "sigma",
         "N",
     ),
-    "damage_time": (
-        "dD/dt = theta (sigma/10 MPa)^b",
-        "1/s",
+    "compliance_time": (
+        "dI/dt = (sigma/10 MPa)^b",
+        "1/(Pa s)",
         "-",
         "damage",
         "sigma",
@@ -83,8 +109,14 @@ MEMORY_TERMS: dict[str, tuple[str, str, str, str, str, str]] = {
     ),
 }
 """The terms with state of [`DiscoveredTerm`][]: id -> (equation, unit of theta,
-unit of the rate k or exponent b, kind, target, driver)."""
+unit of the rate k or exponent b, kind, target, driver). A relaxing term's target
+is what q relaxes towards; a damage's is what it scales: the base's strain (creep
+included, and what stays after unloading) or the stress (an elastic compliance
+that grows: it leaves with the load)."""
 
+# The exponents b of a damage the regression tries (the joint fit holds the chosen
+# one, and the acceleration: see `DiscoveredTerm.used_fields`).
+DAMAGE_EXPONENTS = (1.0, 2.0, 3.0, 4.0, 6.0)
 # The rates the discovery's regression tries for each term (the joint fit refines
 # the chosen one): relaxation rates per unit of the driver (for |dc|, per unit of
 # the covariate's mean total variation over a test: see `rate_grid`), damage
@@ -95,9 +127,15 @@ RATE_GRID: dict[str, tuple[float, ...]] = {
     "relax_sigma_c_abs_rate": (0.3, 1.0, 3.0, 10.0),
     "relax_sigma_cycles": (0.03, 0.1, 0.3, 1.0),
     "relax_c_time": (1 / 300, 1 / 1800, 1 / 10800),
-    "damage_cycles": (1.0, 2.0, 4.0),
-    "damage_time": (1.0, 2.0, 4.0),
+    "damage_cycles": DAMAGE_EXPONENTS,
+    "damage_time": DAMAGE_EXPONENTS,
+    "compliance_cycles": DAMAGE_EXPONENTS,
+    "compliance_time": DAMAGE_EXPONENTS,
 }
+# The accelerations of a damage the regression tries, as the damage D = a I they
+# reach at the largest I of the tests (`accel_grid`): nearly linear, then running
+# away more and more by the end.
+ACCEL_GRID = (0.02, 0.2, 0.35, 0.5, 0.6, 0.7, 0.8, 0.85)
 
 
 def covariate_in(unit: str, covariate_unit: str) -> str:
@@ -114,6 +152,19 @@ def rate_grid(term: str, covariate_variation: float = 1.0) -> tuple[float, ...]:
     if MEMORY_TERMS[term][5] == "|dc|":
         return tuple(g / max(covariate_variation, 1e-300) for g in grid)
     return grid
+
+
+def accel_unit(term: str) -> str:
+    """The unit of a damage's acceleration a: 1 / the unit of its integral I."""
+    return "1/cycle" if MEMORY_TERMS[term][5] == "N" else "1/s"
+
+
+def accel_grid(term: str, largest: float) -> tuple[float, ...]:
+    """The accelerations a of `term` the regression tries: `ACCEL_GRID` / `largest`
+    (the largest damage integral I of the tests), or (0,) for a relaxing term."""
+    if MEMORY_TERMS[term][3] != "damage":
+        return (0.0,)
+    return tuple(f / max(largest, 1e-300) for f in ACCEL_GRID)
 
 
 def memory_step(
@@ -144,32 +195,35 @@ def memory_step(
     return q0 + load * increment
 
 
-def memory_strain(term: str, theta, q, base_strain) -> Array:
-    """The strain a term with memory adds: theta q (relaxing), or eps_base D / (1 -
-    D), D = min(theta I, `MAX_DAMAGE`) (damage)."""
-    if MEMORY_TERMS[term][3] == "relax":
-        return theta * q
-    damage = jnp.minimum(theta * q, MAX_DAMAGE)
-    return base_strain * damage / (1.0 - damage)
+def memory_strain(term: str, theta, q, base_strain, sigma, accel=0.0) -> Array:
+    """The strain a term with memory adds: theta q (relaxing), or theta x I / (1 -
+    D), D = min(a I, `MAX_DAMAGE`) (damage; `accel` a >= 0), x the base's strain
+    `base_strain` or the stress `sigma` (Pa), as the term's target says."""
+    return theta * memory_column(term, q, base_strain, sigma, accel)
 
 
-def memory_column(term: str, q, base_strain) -> Array:
-    """A term with memory's strain per unit theta, to first order: q, or eps_base I
-    (the regression's column)."""
-    if MEMORY_TERMS[term][3] == "relax":
+def memory_column(term: str, q, base_strain, sigma, accel=0.0) -> Array:
+    """A term with memory's strain per unit theta: q, or x I / (1 - D) (the
+    regression's column at a fixed rate and acceleration; x as in
+    [`memory_strain`][])."""
+    _, _, _, kind, target, _ = MEMORY_TERMS[term]
+    if kind == "relax":
         return q
-    return base_strain * q
+    scaled = base_strain if target == "strain" else sigma
+    return scaled * q / (1.0 - jnp.minimum(accel * q, MAX_DAMAGE))
 
 
-def memory_equation(term: str, theta: str, rate: str, covariate: str) -> str:
+def memory_equation(
+    term: str, theta: str, rate: str, covariate: str, accel: str = "0"
+) -> str:
     """`term`'s contribution as an equation with its state, e.g. `eps += theta q;
-    dq/dt = k (sigma - q), k = 5.6e-4 1/s`, the covariate named."""
+    dq/dt = k (sigma - q), k = 5.6e-4 1/s`, the covariate named (`accel`: a
+    damage's acceleration a, as text)."""
     equation, _, _, kind, _, _ = MEMORY_TERMS[term]
     equation = equation.replace("dc", f"d{covariate}").replace(
         "(c - q)", f"({covariate} - q)"
     )
     if kind == "relax":
         return f"{theta} * q, {equation}, k = {rate}"
-    return (
-        f"eps_base D/(1-D), D = theta I, {equation.replace('theta', theta)}, b = {rate}"
-    )
+    scaled = "eps_base" if MEMORY_TERMS[term][4] == "strain" else "sigma"
+    return f"{theta} * {scaled} I/(1 - a I), {equation}, b = {rate}, a = {accel}"
