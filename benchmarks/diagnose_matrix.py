@@ -203,6 +203,10 @@ def main(argv=None):
             chosen[name] = [float(v) for v in values.split(",")]
         effects = list(chosen)
     for effect in effects:
+        # Each effect's kernels are compiled once for its seeds; dropped after them,
+        # or a process that runs every effect outside the catalogue (a discovered
+        # term's model structure per support) outgrew 23 GB.
+        jax.clear_caches()
         sizes = [None]
         if effect in chosen:
             sizes = chosen[effect]
