@@ -201,3 +201,32 @@ def test_diagnosis_names_the_covariate_form_and_its_column(hidden):
         discover=False,
     )
     assert len(d.candidates) == 0 and "mechano" not in d.named_cause
+
+
+def test_discover_finds_a_damage_that_runs_away():
+    """A compliance that grows with the load cycles as a power of the stress and runs
+    away, theta sigma I / (1 - a I) with dI/dN = (sigma / 10 MPa)^4, hidden in a
+    cycling Burgers cable (no covariate): the discovery finds that damage with an
+    acceleration well above 0 (the run-away, not a damage linear in I), and it
+    predicts the held-out samples."""
+    from jaxcable._diagnose.library import damage_integral, step_inputs
+
+    def largest(tests):
+        return max(
+            float(damage_integral(step_inputs(t, None), "compliance_cycles", 4.0)[-1])
+            for t in tests
+        )
+
+    # D = a I reaches 0.7 at the end of the 160 N test: 1 / (1 - D) = 3.3.
+    accel = 0.7 / largest(_tests(BASE, covariate=False))
+    true = jc.DiscoveredTerm(
+        BASE, terms=("compliance_cycles",), theta0=5e-14, rate0=4.0, accel0=accel
+    )
+    tests = _tests(true, covariate=False)
+    base_fit = jc.fit(BASE, _train(tests), fit=BASE_FIT, drive="force", multistart=1)
+    found = jc.discover(base_fit, tests)
+    assert "compliance_cycles" in found.terms, found.path
+    k = found.terms.index("compliance_cycles")
+    assert found.accels[k] * largest(tests) >= 0.3, found.equation
+    assert "sigma I/(1 - a I), dI/dN = (sigma/10 MPa)^b" in found.equation
+    assert found.gain_pct > 50, found.heldout_rmse_mm
