@@ -210,7 +210,11 @@ def memory_column(term: str, q, base_strain, sigma, accel=0.0) -> Array:
     if kind == "relax":
         return q
     scaled = base_strain if target == "strain" else sigma
-    return scaled * q / (1.0 - jnp.minimum(accel * q, MAX_DAMAGE))
+    # min(a I, MAX_DAMAGE) by arithmetic, so that NumPy columns (the regression's)
+    # stay NumPy float64 whatever JAX's default precision.
+    damage = accel * q
+    damage = damage + (MAX_DAMAGE - damage) * (damage > MAX_DAMAGE)
+    return scaled * q / (1.0 - damage)
 
 
 def memory_equation(
