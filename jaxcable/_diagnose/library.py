@@ -119,12 +119,8 @@ def library(test, covariate: str | None, names=tuple(TERMS)) -> dict[str, np.nda
 
 def _driver_steps(x: dict[str, np.ndarray], driver: str) -> np.ndarray:
     """The increments of a term's driver over every step of `step_inputs`' `x`."""
-    return {
-        "t": x["dt"],
-        "t_load": x["dt_loaded"],
-        "|dc|": np.abs(x["c1"] - x["c0"]),
-        "N": x["cycles1"] - x["cycles0"],
-    }[driver]
+    keys = ("dt", "dt_loaded", "c0", "c1", "cycles0", "cycles1")
+    return memory.driver_increment(driver, *(x[k] for k in keys))
 
 
 def damage_integral(x: dict[str, np.ndarray], term: str, rate: float) -> np.ndarray:

@@ -167,6 +167,19 @@ def accel_grid(term: str, largest: float) -> tuple[float, ...]:
     return tuple(f / max(largest, 1e-300) for f in ACCEL_GRID)
 
 
+def driver_increment(driver: str, dt, dt_loaded, c0, c1, cycles0, cycles1):
+    """The increment of a term's driver over a step (see [`memory_step`][] for the
+    arguments): elapsed time, time under load, |dc| or load cycles. Elementwise, on
+    traced arrays and on NumPy ones alike (NumPy stays NumPy: the regression's
+    columns keep float64)."""
+    return {
+        "t": dt,
+        "t_load": dt_loaded,
+        "|dc|": abs(c1 - c0),
+        "N": cycles1 - cycles0,
+    }[driver]
+
+
 def memory_step(
     term: str, rate, q0, sigma0, sigma1, c0, c1, dt, dt_loaded, cycles0, cycles1
 ) -> Array:
@@ -179,12 +192,7 @@ def memory_step(
     q1 (a relaxing variable: Pa or the covariate's unit) or I1 (a damage's integral).
     """
     _, _, _, kind, target, driver = MEMORY_TERMS[term]
-    increment = {
-        "t": dt,
-        "t_load": dt_loaded,
-        "|dc|": jnp.abs(c1 - c0),
-        "N": cycles1 - cycles0,
-    }[driver]
+    increment = driver_increment(driver, dt, dt_loaded, c0, c1, cycles0, cycles1)
     if kind == "relax":
         goal = 0.5 * (sigma0 + sigma1) if target == "sigma" else 0.5 * (c0 + c1)
         return goal + (q0 - goal) * jnp.exp(-rate * increment)
