@@ -120,20 +120,19 @@ def shared_data():
 
 
 # `make test` runs the suite in two xdist workers (--dist loadgroup), each taking one
-# group at a time in this order: the slowest groups first, so that neither worker is
-# left with a long one at the end while the other idles. A group is a file (its
-# module-scoped fixtures and compiled kernels stay in one process), except for the
-# tests of OWN_GROUP, each its own group: every notebook (each runs in its own kernel
-# anyway), the calibration (in its own interpreter, tests/test_papers.py) and the
-# demo, so that they start early without the rest of their file. Seconds on a 2-core
-# machine, from `--durations` in a whole run under load (two workers, load average
-# 5-8); update the list when a file grows slow.
+# group at a time in this order: the longest groups first (the longest-processing-
+# time rule), so that neither worker is left with a long one at the end while the
+# other idles. A group is a file (its module-scoped fixtures and compiled kernels stay
+# in one process), except for the tests of OWN_GROUP, each its own group: every
+# notebook (each runs in its own kernel anyway), the calibration (in its own
+# interpreter, tests/test_papers.py) and the demo, so that they start early without
+# the rest of their file. Seconds on the 2-core machine, from `--durations=0` of a
+# whole run (two workers); update the list when a group grows slow. Groups not listed
+# (a few seconds each) come last, in the files' order.
 #
-# A worker is handed its next group while it still has up to two tests to run, so
-# the first worker runs the demo and then the diagnosis notebook, while the second
-# runs the calibration: the demo fits and diagnoses the bundled data set as
-# 02_fit.ipynb and 03_diagnose.ipynb do, and the notebooks then load those programs
-# from the run's compilation cache instead of compiling them again.
+# The demo comes first: it fits and diagnoses the bundled data set as 02_fit.ipynb
+# and 03_diagnose.ipynb do, and the notebooks then load those programs from the run's
+# compilation cache instead of compiling them again; then the groups by length.
 NOTEBOOK_RUNS = "tests/test_notebooks.py::test_notebook_runs["
 DEMO = "tests/test_cli.py::test_demo_bundled_data"
 OWN_GROUP = (
@@ -142,31 +141,49 @@ OWN_GROUP = (
     DEMO,
 )
 SLOW_FIRST = (
-    DEMO,  # 18 s
-    "tests/test_papers.py::test_calibrate_runs_and_does_not_worsen",  # 49 s
-    "tests/test_notebooks.py::test_notebook_runs[03_diagnose.ipynb]",  # 87 s
-    "tests/test_cli.py",  # 262 s
-    "tests/test_diagnose.py",  # 190 s
-    "tests/test_jax_contract.py",  # 200 s before its gradient tests were jitted
-    "tests/test_diagnose_drive.py",  # about 100 s
-    "tests/test_rounds.py",  # 84 s, most of it one diagnosis
-    "tests/test_two_pass.py",  # 68 s
-    "tests/test_cpu_loops.py",  # two fresh interpreters: 58 s
-    "tests/test_extensions.py",  # 52 s
-    "tests/test_drive.py",  # about 60 s
-    "tests/test_fit.py",  # 115 s
-    "tests/test_notebooks.py::test_notebook_runs[05_cdpr.ipynb]",  # 75 s
-    "tests/test_cdpr.py",  # 187 s before its gradient tests shared a compilation
-    "tests/test_papers.py",  # 51 s
-    "tests/test_integrated.py",  # 49 s
-    "tests/test_round_trip.py",  # 48 s
-    "tests/test_montecarlo.py",  # 43 s
-    "tests/test_distributed.py",  # three processes: 38 s
-    "tests/test_notebooks.py::test_notebook_runs[02_fit.ipynb]",  # 55 s
-    "tests/test_discover.py",  # about 40 s
-    "tests/test_notebooks.py::test_notebook_runs[01_papers.ipynb]",  # 24 s
-    "tests/test_five_element.py",  # 25 s
-    "tests/test_long_histories.py",
+    DEMO,  # 30 s
+    # Before test_papers.py, whose `report` fixture loads the program it compiles.
+    "tests/test_papers.py::test_calibrate_runs_and_does_not_worsen",  # 45 s
+    # After the demo, on the same worker (a worker is handed its next group while it
+    # still has up to two tests to run, so the other takes the calibration).
+    f"{NOTEBOOK_RUNS}03_diagnose.ipynb]",  # 91 s
+    "tests/test_diagnose.py",  # 78 s
+    "tests/test_jax_contract.py",  # 54 s
+    "tests/test_two_pass.py",  # 52 s
+    "tests/test_discover.py",  # 44 s
+    "tests/test_diagnose_drive.py",  # 43 s
+    "tests/test_drive.py",  # 41 s
+    "tests/test_rounds.py",  # 38 s
+    "tests/test_fit.py",  # 38 s
+    "tests/test_cli.py",  # 37 s
+    f"{NOTEBOOK_RUNS}02_fit.ipynb]",  # 35 s
+    "tests/test_cdpr.py",  # 31 s
+    "tests/test_distributed.py",  # 31 s, three processes
+    f"{NOTEBOOK_RUNS}05_cdpr.ipynb]",  # 28 s
+    "tests/test_integrated.py",  # 27 s
+    "tests/test_cache.py",  # 26 s
+    "tests/test_extensions.py",  # 25 s
+    "tests/test_rate_solver.py",  # 25 s
+    "tests/test_montecarlo.py",  # 25 s
+    "tests/test_papers.py",  # 24 s
+    "tests/test_long_histories.py",  # 22 s
+    "tests/test_shared_kernel.py",  # 21 s
+    "tests/test_errors.py",  # 20 s
+    f"{NOTEBOOK_RUNS}01_papers.ipynb]",  # 19 s
+    "tests/test_controller.py",  # 17 s
+    "tests/test_cpu_loops.py",  # 16 s, one fresh interpreter
+    "tests/test_covariate_extensions.py",  # 15 s
+    "tests/test_fit_each.py",  # 15 s
+    "tests/test_hidden_effects.py",  # 11 s
+    "tests/test_round_trip.py",  # 10 s
+    "tests/test_continuity_models.py",  # 10 s
+    "tests/test_five_element.py",  # 9 s
+    "tests/test_baselines.py",  # 7 s
+    "tests/test_breaking_strain.py",  # 7 s
+    "tests/test_cli_robust.py",  # 7 s
+    "tests/test_physics.py",  # 6 s
+    "tests/test_registry.py",  # 6 s
+    "tests/test_exports.py",  # 6 s
 )
 
 

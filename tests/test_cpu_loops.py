@@ -12,6 +12,7 @@ import pytest
 
 import jaxcable as jc
 from jaxcable._cpu_loops import (
+    DEFAULT_LOOP_KERNEL_BYTES,
     NO_LOOP_KERNELS_ENV,
     loop_kernels_disabled,
     try_enable_cpu_loop_kernels,
@@ -70,41 +71,55 @@ def test_the_command_line_switch(monkeypatch):
         assert loop_kernels_disabled() is disabled
 
 
-# One script, run in fresh interpreters: does importing jaxcable start JAX's backend,
-# and the float64 results of the three drives and a gradient, with and without the
-# loop kernels.
+# One script, run in a fresh interpreter with XLA's defaults (no XLA_FLAGS): does
+# importing jaxcable start JAX's backend, and the float64 results of the three drives
+# and a gradient, which this process (with the loop kernels, tests/conftest.py)
+# computes again.
 _SCRIPT = r"""
-import json, sys
+import json
 import jax
 jax.config.update("jax_enable_x64", True)
-import jax.numpy as jnp
 import numpy as np
 import jaxcable as jc
 from jax._src import xla_bridge
 started_by_import = xla_bridge.backends_are_initialized()
-flags = jc.enable_cpu_loop_kernels() if sys.argv[1] == "on" else None
-model = jc.IntegratedModel()
-protocol = jc.Protocol.cycles(100.0, 2, samples_per_ramp=60, start=False)
-cable = jc.Cable(length=0.3, speed=5e-3 / 60)
-rate = jc.simulate_rate_test(model, cable, protocol)
-elong = jc.simulate_elongation_history(model, cable, rate.time, rate.elongation)
-force = jc.simulate_force_history(model, cable, rate.time, rate.force)
-def loss(E1c):
-    m = jc.IntegratedModel(E1c=E1c)
-    return jnp.sum(jc.simulate_rate_test(m, cable, protocol).elongation ** 2)
-grad = jax.grad(loss)(jnp.asarray(model.E1c))
-print(json.dumps(dict(
-    started_by_import=started_by_import, flags=flags,
-    rate=np.asarray(rate.elongation).tolist(), time=np.asarray(rate.time).tolist(),
-    elong=np.asarray(elong.force).tolist(), force=np.asarray(force.elongation).tolist(),
-    grad=float(grad))))
+from tests.test_cpu_loops import drives
+print(json.dumps(dict(started_by_import=started_by_import, **drives())))
 """
 
 
-def _run(mode):
+def drives() -> dict:
+    """The float64 results of the three drives and a gradient, as lists."""
+    import jax
+
+    model = jc.IntegratedModel()
+    protocol = jc.Protocol.cycles(100.0, 2, samples_per_ramp=60, start=False)
+    cable = jc.Cable(length=0.3, speed=5e-3 / 60)
+    rate = jc.simulate_rate_test(model, cable, protocol)
+    elong = jc.simulate_elongation_history(model, cable, rate.time, rate.elongation)
+    force = jc.simulate_force_history(model, cable, rate.time, rate.force)
+
+    def loss(E1c):
+        m = jc.IntegratedModel(E1c=E1c)
+        return jnp.sum(jc.simulate_rate_test(m, cable, protocol).elongation ** 2)
+
+    grad = jax.grad(loss)(jnp.asarray(model.E1c))
+    return dict(
+        rate=np.asarray(rate.elongation).tolist(),
+        time=np.asarray(rate.time).tolist(),
+        elong=np.asarray(elong.force).tolist(),
+        force=np.asarray(force.elongation).tolist(),
+        grad=float(grad),
+    )
+
+
+@pytest.fixture(scope="module")
+def default():
     env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [root, env.get("PYTHONPATH")]))
     done = subprocess.run(
-        [sys.executable, "-c", _SCRIPT, mode],
+        [sys.executable, "-c", _SCRIPT],
         env=env,
         capture_output=True,
         text=True,
@@ -114,23 +129,25 @@ def _run(mode):
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
-@pytest.fixture(scope="module")
-def both():
-    return _run("off"), _run("on")
-
-
-def test_importing_jaxcable_computes_nothing(both):
+def test_importing_jaxcable_computes_nothing(default):
     # Otherwise XLA_FLAGS set after `import jaxcable` would be ignored.
-    default, loops = both
     assert default["started_by_import"] is False
-    assert loops["started_by_import"] is False
-    assert loops["flags"] == f"--xla_backend_extra_options={_OPTION}=16777216"
 
 
-def test_loop_kernels_give_xla_defaults_results(both):
-    # XLA's default (no XLA_FLAGS at all) against the loop kernels: the same float64
-    # computation, compiled differently, so equal to rounding.
-    default, loops = both
+def test_the_suite_runs_with_the_default_threshold():
+    if os.environ.get("JAXCABLE_TEST_LOOP_KERNELS", "on") == "off":
+        pytest.skip("the loop kernels are off (`make test-xla-default`)")
+    assert f"{_OPTION}=16777216" in os.environ["XLA_FLAGS"]
+    assert with_loop_kernel_option("", DEFAULT_LOOP_KERNEL_BYTES) == (
+        f"--xla_backend_extra_options={_OPTION}=16777216"
+    )
+
+
+def test_loop_kernels_give_xla_defaults_results(default):
+    # XLA's default (no XLA_FLAGS at all) against this process's compilation (the
+    # loop kernels, and the suite's emitters): the same float64 computation, compiled
+    # differently, so equal to rounding.
+    loops = drives()
     for key in ("time", "rate", "elong", "force"):
         a, b = np.asarray(default[key]), np.asarray(loops[key])
         assert a.shape == b.shape and np.all(np.isfinite(b))
