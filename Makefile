@@ -20,16 +20,17 @@ test: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
 	# Two worker processes (pytest-xdist) share the cores, one file (or notebook) at a
-	# time each, the slowest first (tests/conftest.py), and one compilation cache. Two
+	# time each, the slowest first (tests/conftest.py; --no-loadscope-reorder, or xdist
+	# would order the groups by their number of tests), and one compilation cache. Two
 	# processes also because late in one long process XLA's CPU compiler crashed
 	# (SIGSEGV, SIGABRT) on a fresh clone; each half of the suite alone passes.
 	# tests/conftest.py compiles with XLA's faster-compiling CPU emitters when this jaxlib
 	# has them, and with the scans' loops as single kernels (jaxcable.enable_cpu_loop_kernels,
 	# as the command line); `make test-xla-default` runs the same suite with XLA's defaults.
-	$(BIN)/pytest -q --durations=25 -n $(WORKERS) --dist loadgroup tests
+	$(BIN)/pytest -q --durations=25 -n $(WORKERS) --dist loadgroup --no-loadscope-reorder tests
 
 test-xla-default: $(STAMP)
-	JAXCABLE_TEST_XLA_EMITTERS=default JAXCABLE_TEST_LOOP_KERNELS=off $(BIN)/pytest -q --durations=25 -n $(WORKERS) --dist loadgroup tests
+	JAXCABLE_TEST_XLA_EMITTERS=default JAXCABLE_TEST_LOOP_KERNELS=off $(BIN)/pytest -q --durations=25 -n $(WORKERS) --dist loadgroup --no-loadscope-reorder tests
 
 lint: $(STAMP)
 	$(BIN)/ruff check .
