@@ -111,6 +111,13 @@ from ._progress import (
 )
 from ._report import write_diagnosis_report as write_diagnosis_report
 from ._results import RESULTS as RESULTS
+from ._uncertainty import (
+    DesignedTest as DesignedTest,
+    Posterior as Posterior,
+    TestBudget as TestBudget,
+    design_test as design_test,
+    sample_posterior as sample_posterior,
+)
 
 
 __version__ = importlib.metadata.version("jaxcable")

@@ -29,7 +29,7 @@ LAYERS = [
     {"_drive"},
     {"_io"},
     {"_fit"},
-    {"_diagnose", "_montecarlo", "_papers"},
+    {"_diagnose", "_montecarlo", "_papers", "_uncertainty"},
     {"_report"},
     {"_cli", "cdpr", "cli", "papers", "states", "__init__", "__main__"},
 ]

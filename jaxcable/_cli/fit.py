@@ -2,6 +2,7 @@
 summary on stdout and optionally a report folder; with `--each`, every file fitted
 on its own (one `jaxcable.fit_each`), one PARAMS.json per file and a summary table."""
 
+import argparse
 import contextlib
 import csv
 import io
@@ -26,6 +27,7 @@ from .._fit import (
 from .._models import AbstractCableModel
 from .._progress import AbstractProgressMeter
 from .._report import FIT_REPORT_FILES, write_report
+from .._uncertainty import Posterior, sample_posterior
 from .common import CliError, make_folder, progress_meter, require_folder_of
 from .data import data_options, describe_tests, read_tests
 from .models import names_option, resolve_model
@@ -167,11 +169,17 @@ def fit_command(args) -> int:
     fit_names = names_option(args.fit, "--fit", model, name)
     per_test = names_option(args.per_test, "--per-test", model, name)
     require_folder_of(args.out, "--out")
+    if args.posterior and (args.each or per_test):
+        raise CliError(
+            "--posterior: not available with --each or --per-test (the posterior "
+            "samples one shared parameter set)."
+        )
     if args.each:
         return each_command(args, meter, model, name, fit_names, per_test)
     outputs = [("--out", args.out)]
     if args.report:
-        outputs += report_files(args.report, FIT_REPORT_FILES)
+        names = FIT_REPORT_FILES + ((_POSTERIOR_PNG,) if args.posterior else ())
+        outputs += report_files(args.report, names)
     refuse_inputs(outputs, input_files(args))
     tests, drives = read_described(args, meter)
     result = run_fit(
@@ -192,9 +200,16 @@ def fit_command(args) -> int:
     # one is written for inspection, then reported.
     if failure is not None and not np.isfinite(result.loss):
         raise failure
+    posterior = None
+    if args.posterior and failure is None:
+        posterior = run_posterior(model, name, tests, fit_names, args, drives, result)
+        print(posterior.summary())
+        print()
+    elif args.posterior:
+        print("--posterior: not sampled, the fit did not converge.")
     say_replacing([args.out], "--out")
     with write_errors("--out", args.out):
-        result.to_json(args.out)
+        write_params(args.out, result, posterior)
     print(f"wrote {args.out}")
     if args.report:
         out = pathlib.Path(args.report)
@@ -213,6 +228,7 @@ def fit_command(args) -> int:
                 title=f"jaxcable fit: model '{name}'",
                 notes=notes,
                 progress_meter=meter,
+                posterior=posterior,
             )
         print(
             f"wrote the report to {out}{os.sep}: {', '.join(p.name for p in written)}"
@@ -222,8 +238,85 @@ def fit_command(args) -> int:
     return 0
 
 
+# The pair plot `write_report` adds for a posterior (`jaxcable._report`'s
+# POSTERIOR_FILE).
+_POSTERIOR_PNG = "posterior.png"
+
+
+def run_posterior(model, name, tests, fit_names, args, drives, result) -> Posterior:
+    """`jaxcable.sample_posterior` started from the fit `result`, with
+    `args.posterior` draws per chain, `args.chains` chains, as many warm-up steps
+    (at least 200) and the key of `--seed`."""
+    n = args.posterior
+    print(f"sampling the posterior: {args.chains} chains x {n} draws (NUTS)")
+    try:
+        return sample_posterior(
+            model,
+            tests,
+            fit=fit_names or None,
+            drive=[d.drive for d in drives],
+            num_samples=n,
+            num_chains=args.chains,
+            num_warmup=max(n, 200),
+            key=jax.random.key(args.seed),
+            start=result,
+        )
+    except ValueError as e:
+        raise CliError(f"--posterior: cannot sample model '{name}': {e}") from None
+
+
+def write_params(path, result: FitResult, posterior: Posterior | None) -> None:
+    """Write PARAMS.json: the fit's, with the posterior's summary when there is one:
+    `posterior`, one entry per parameter (mean, sd, q2.5, q50, q97.5, rhat, ess),
+    and `posterior_sampler`, the sampler's settings and outcome."""
+    if posterior is None:
+        result.to_json(path)
+        return
+    document = json.loads(result.to_json())
+    # Lists and strings only: the reader of PARAMS.json takes every object at the
+    # top level for a wrapped model.
+    summary = posterior.to_dict()
+    document["posterior"] = summary.pop("parameters")
+    document["posterior_sampler"] = [{k: v} for k, v in summary.items()]
+    write_text_atomic(path, json.dumps(document, indent=2) + "\n")
+
+
+def _at_least(low: int):
+    """An argparse `type`: an integer >= `low` (draws or chains)."""
+
+    def parse(text: str) -> int:
+        shown = text if len(text) <= 30 else f"{text[:20]}... ({len(text)} characters)"
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{shown!r} is not an integer") from None
+        if value < low:
+            raise argparse.ArgumentTypeError(f"{shown} must be at least {low}")
+        return value
+
+    return parse
+
+
 def add_out_options(parser) -> None:
-    """`--out` and `--each` of `jaxcable fit`."""
+    """`--out`, `--each` and the posterior options of `jaxcable fit`."""
+    group = parser.add_argument_group("posterior")
+    group.add_argument(
+        "--posterior",
+        type=_at_least(4),
+        metavar="N",
+        help="after the fit, sample the Bayesian posterior of the fitted parameters "
+        "by NUTS (jaxcable.sample_posterior): N draws per chain; its summary (mean, "
+        "sd, 2.5/50/97.5 %%, R-hat, ESS) is printed, added to PARAMS.json ("
+        "'posterior', 'posterior_sampler') and, with --report, to summary.md with a pair plot "
+        "(posterior.png)",
+    )
+    group.add_argument(
+        "--chains",
+        type=_at_least(2),
+        default=4,
+        metavar="N",
+        help="chains of --posterior (default: 4)",
+    )
     parser.add_argument(
         "--out",
         metavar="PARAMS.json",

@@ -1,4 +1,4 @@
-"""The `jaxcable` command line: `jaxcable simulate`, `fit`, `diagnose` and `demo`.
+"""The `jaxcable` command line: `jaxcable simulate`, `fit`, `diagnose`, `design` and `demo`.
 
 Errors in the user's input (files, arguments) exit with status 2 and one line on
 stderr saying what is wrong and where; a simulation or fit that fails exits with

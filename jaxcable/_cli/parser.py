@@ -14,6 +14,7 @@ from .._models import (
 from .cache import cache_command
 from .common import PROG, CliError
 from .demo import demo_command
+from .design import add_design_command as _design
 from .diagnose import diagnose_command
 from .fit import add_out_options, fit_command
 from .numbers import (
@@ -279,6 +280,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     for add in (_simulate, _fit, _diagnose, _demo, _cache):
         add(commands)
+    _design(commands, _add_model_options, _add_data_options, _add_drive_option)
     return parser
 
 

@@ -1,0 +1,118 @@
+"""The posterior of the bundled data set: R-hat, ESS and time of
+`jaxcable.sample_posterior` on the eight bundled files, the demo's fitted parameters.
+
+    python benchmarks/posterior_bundled.py [--every 1] [--chains 4] [--draws 500]
+        [--warmup 500] [--max-doublings 8] [--progress] [--json-out FILE]
+
+The least-squares fit comes first (`jaxcable.fit`, as `make demo` runs it, timed
+apart), then NUTS from it. `--every K` keeps one sample in K of every file (as
+`jaxcable fit --every`), which shortens each gradient K times. Reported: per
+parameter the posterior mean, sd, R-hat and bulk ESS, beside the fit's value and
+linearised standard error; the sampler's time, compilation included. Target: R-hat <= 1.01 and ESS >= 400 for every parameter within
+5 minutes on the 2-core CPU. Prints one JSON object, then a table.
+"""
+
+import argparse
+import dataclasses
+import importlib.resources
+import json
+import os
+import platform
+import time
+import warnings
+
+import jax
+
+
+jax.config.update("jax_enable_x64", True)
+
+import numpy as np  # noqa: E402
+
+import jaxcable as jc  # noqa: E402
+
+
+def _thinned(test: jc.TestData, every: int) -> jc.TestData:
+    if every == 1:
+        return test
+    keep = np.arange(0, test.num_samples, every)
+    columns = {
+        f.name: getattr(test, f.name)[keep]
+        for f in dataclasses.fields(test)
+        if np.shape(getattr(test, f.name)) == (test.num_samples,)
+    }
+    extra = {k: v[keep] for k, v in (test.extra or {}).items()}
+    return dataclasses.replace(test, **columns, extra=extra)
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--every", type=int, default=1)
+    p.add_argument("--chains", type=int, default=4)
+    p.add_argument("--draws", type=int, default=500)
+    p.add_argument("--warmup", type=int, default=500)
+    p.add_argument("--max-doublings", type=int, default=8)
+    p.add_argument("--progress", action="store_true")
+    p.add_argument("--json-out", default=None)
+    args = p.parse_args()
+    folder = importlib.resources.files("jaxcable").joinpath("data")
+    files = sorted(f for f in folder.iterdir() if f.name.endswith(".csv"))
+    tests = [_thinned(jc.read_test(f), args.every) for f in files]
+    model = jc.IntegratedModel()
+    names = list(jc.PARK_IDENTIFIABLE)
+    t0 = time.perf_counter()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", jc.IdentifiabilityWarning)
+        fit = jc.fit(model, tests, fit=names, throw=False)
+    t_fit = time.perf_counter() - t0
+    meter = jc.TextProgressMeter() if args.progress else jc.NoProgressMeter()
+    t0 = time.perf_counter()
+    post = jc.sample_posterior(
+        model,
+        tests,
+        fit=names,
+        start=fit,
+        num_samples=args.draws,
+        num_chains=args.chains,
+        num_warmup=args.warmup,
+        max_doublings=args.max_doublings,
+        key=jax.random.key(0),
+        progress_meter=meter,
+    )
+    t_post = time.perf_counter() - t0
+    out = {
+        "benchmark": "posterior_bundled",
+        "settings": vars(args),
+        "samples_per_test": [t.num_samples for t in tests],
+        "names": list(post.names),
+        "fit_seconds": t_fit,
+        "posterior_seconds": t_post,
+        "rhat": [float(r) for r in post.rhat],
+        "ess": [float(e) for e in post.ess],
+        "mean": [float(m) for m in post.mean],
+        "sd": [float(s) for s in post.sd],
+        "fit_values": [float(v) for v in fit.values],
+        "fit_stderr": [float(s) for s in fit.stderr],
+        "divergences": post.divergences,
+        "mean_steps_per_draw": post.mean_steps,
+        "target_met": bool(
+            np.all(post.rhat <= 1.01) and np.all(post.ess >= 400) and t_post <= 300
+        ),
+        "machine": f"{platform.machine()}, {os.cpu_count()} cores",
+        "load_average": os.getloadavg(),
+    }
+    text = json.dumps(out, indent=1)
+    print(text)
+    if args.json_out:
+        with open(args.json_out, "w") as f:
+            f.write(text + "\n")
+    print()
+    print(post.summary())
+    print(
+        f"fit {t_fit:.1f} s; posterior {t_post:.1f} s "
+        f"({args.chains} chains x ({args.warmup} + {args.draws})); "
+        f"target met: {out['target_met']}"
+    )
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,182 @@
+"""`jaxcable design`: the next test to run, designed from a fit (or a posterior) of
+measured tests, written as a protocol file that `jaxcable simulate` and a tester
+run."""
+
+import argparse
+import math
+
+import numpy as np
+
+from .._uncertainty import TestBudget, design_test
+from .common import CliError, progress_meter, require_folder_of
+from .fit import fit_failure, read_described, run_fit, run_posterior
+from .models import names_option, resolve_model
+from .outputs import refuse_inputs, say_replacing, write_errors
+
+
+DESCRIPTION = (
+    "Fit a model to the measured tests (as 'jaxcable fit'), then design the next "
+    "test: ramps to load levels, holds, ramps down and rests at one crosshead "
+    "speed, chosen by gradient through the model to shrink the uncertainty of the "
+    "least identified parameters most (D_s-optimal Fisher information; see "
+    "jaxcable.design_test), within the lab's limits: total duration, largest force "
+    "as a fraction of the breaking load, speed range, samples. Writes the test as "
+    "a protocol file and prints what it is expected to gain beside Park's "
+    "standard 10-cycle protocol of the same duration, and why."
+)
+
+
+def _number(convert, valid, requirement):
+    def parse(text: str):
+        shown = text if len(text) <= 30 else f"{text[:20]}..."
+        try:
+            value = convert(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{shown!r} is not a number") from None
+        if not valid(value):
+            raise argparse.ArgumentTypeError(f"{shown} {requirement}")
+        return value
+
+    return parse
+
+
+def _speeds(text: str) -> tuple[float, float]:
+    parts = text.split(",")
+    try:
+        low, high = (float(p) for p in parts)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not two numbers MIN,MAX (mm/min)"
+        ) from None
+    if not 0 < low <= high < math.inf:
+        raise argparse.ArgumentTypeError(f"{text!r} needs 0 < MIN <= MAX")
+    return low, high
+
+
+_positive = _number(float, lambda v: math.isfinite(v) and v > 0, "must be > 0")
+_fraction = _number(float, lambda v: 0 < v <= 1, "must be in (0, 1]")
+_int = _number(int, lambda v: v >= 1, "must be at least 1")
+
+
+def add_design_command(commands, add_model_options, add_data_options, add_drive):
+    """The `jaxcable design` subparser (the shared option builders of the parser
+    passed in, to add the same model, data and drive options as `jaxcable fit`)."""
+    parser = commands.add_parser(
+        "design",
+        help="design the next test to run (a protocol file)",
+        description=DESCRIPTION,
+    )
+    parser.set_defaults(run=design_command)
+    parser.add_argument("data", nargs="+", metavar="DATA.csv", help="measured tests")
+    add_model_options(parser, "start values, as for 'jaxcable fit'")
+    parser.add_argument(
+        "--out", metavar="NEXT.json", required=True, help="the protocol file to write"
+    )
+    add_data_options(parser)
+    add_drive(parser, "of each test")
+    what = parser.add_argument_group("what is known")
+    what.add_argument("--fit", metavar="NAMES", help="parameters to fit")
+    what.add_argument("--starts", type=_int, default=4, metavar="N")
+    what.add_argument("--seed", type=int, default=0, metavar="N")
+    what.add_argument("--max-steps", type=_int, default=256, metavar="N")
+    what.add_argument("--every", type=_int, default=1, metavar="K")
+    what.add_argument("--quiet", action="store_true")
+    what.add_argument(
+        "--posterior",
+        type=_int,
+        metavar="N",
+        help="design from the posterior (N NUTS draws per chain) instead of the "
+        "fit's linearised covariance",
+    )
+    what.add_argument("--chains", type=_int, default=4, metavar="N")
+    lab = parser.add_argument_group("the lab's limits")
+    lab.add_argument(
+        "--duration-s",
+        type=_positive,
+        required=True,
+        metavar="S",
+        help="total duration of the test, s",
+    )
+    lab.add_argument(
+        "--max-force-fraction",
+        type=_fraction,
+        default=0.05,
+        metavar="X",
+        help="largest force as a fraction of the breaking load (default 0.05)",
+    )
+    lab.add_argument(
+        "--speed",
+        type=_speeds,
+        default=(1.0, 100.0),
+        metavar="MIN,MAX",
+        help="crosshead speed range, mm/min (default 1,100)",
+    )
+    lab.add_argument("--samples", type=_int, default=240, metavar="N")
+    lab.add_argument("--blocks", type=_int, default=2, metavar="N")
+    lab.add_argument(
+        "--noise-mm",
+        type=_positive,
+        metavar="X",
+        help="elongation noise, mm (default: the fit's RMS residual)",
+    )
+    lab.add_argument("--targets", metavar="NAMES", help="parameters to learn about")
+    lab.add_argument("--design-steps", type=_int, default=40, metavar="N")
+
+
+def design_command(args) -> int:
+    """Run `jaxcable design`; the exit status."""
+    meter = progress_meter(args)
+    name, model = resolve_model(args, per_test_hint="design needs shared parameters.")
+    fit_names = names_option(args.fit, "--fit", model, name)
+    targets = names_option(args.targets, "--targets", model, name) or None
+    require_folder_of(args.out, "--out")
+    refuse_inputs([("--out", args.out)], [("DATA.csv", str(p)) for p in args.data])
+    args.per_test = None
+    tests, drives = read_described(args, meter)
+    result = run_fit(
+        model,
+        name,
+        tests,
+        fit_names=fit_names,
+        per_test=[],
+        args=args,
+        meter=meter,
+        drive=[d.drive for d in drives],
+    )
+    print()
+    print(result.summary())
+    print()
+    failure = fit_failure(result)
+    if failure is not None:
+        raise failure
+    known = result
+    if args.posterior:
+        known = run_posterior(model, name, tests, fit_names, args, drives, result)
+        print(known.summary())
+        print()
+    try:
+        budget = TestBudget(
+            duration_s=args.duration_s,
+            max_force_fraction=args.max_force_fraction,
+            speed_mm_per_min=args.speed,
+            samples=args.samples,
+            blocks=args.blocks,
+            noise_mm=args.noise_mm,
+        )
+        designed = design_test(
+            known,
+            budget=budget,
+            cable=tests[0].cable(),
+            targets=targets,
+            steps=args.design_steps,
+        )
+    except ValueError as e:
+        raise CliError(f"cannot design the test: {e}") from None
+    print(designed.summary())
+    if not np.all(np.isfinite(designed.sd_after)):
+        raise CliError("the designed test did not simulate.", status=1)
+    say_replacing([args.out], "--out")
+    with write_errors("--out", args.out):
+        designed.to_json(args.out)
+    print(f"wrote {args.out} (run it with: jaxcable simulate {args.out} --params ...)")
+    return 0

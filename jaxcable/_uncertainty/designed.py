@@ -1,0 +1,299 @@
+"""`jaxcable.design_test` and its outcome, `DesignedTest`: the protocol, its file,
+and what it is expected to teach beside Park's standard protocol of the same
+duration."""
+
+import dataclasses
+import json
+import os
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._cable import Cable
+from .._drive import Protocol, simulate_rate_test
+from .._files import write_text_atomic
+from .budget import TestBudget
+from .design import (
+    Design,
+    Knowledge,
+    Layout,
+    default_targets,
+    information,
+    knowledge_of,
+    log_det_subset,
+    protocol_of,
+)
+
+
+# Park's standard protocol: 10 load-unload cycles (Park et al., Section 2.1).
+PARK_CYCLES = 10
+
+
+@dataclasses.dataclass(frozen=True)
+class DesignedTest:
+    """The outcome of [`jaxcable.design_test`][].
+
+    **Fields:**
+
+    - `protocol`: the designed test, a [`jaxcable.Protocol`][].
+    - `cable`: the cable at the designed crosshead speed.
+    - `document`: the protocol file (a dict; `to_json` writes it) that
+        `jaxcable simulate` and a tester run.
+    - `names`: the fitted parameters.
+    - `targets`: the parameters the design aimed at.
+    - `sd_before`: each parameter's standard deviation now (relative, for a
+        positive one: of its logarithm).
+    - `sd_after`: expected after adding the designed test (linearised).
+    - `sd_standard`: expected after adding Park's 10-cycle protocol of the same
+        duration and largest force instead.
+    - `duration_s`: the designed test's simulated duration, s.
+    - `criterion`: log det of the targets' covariance: `(before, designed,
+        standard)`.
+    """
+
+    protocol: Protocol
+    cable: Cable
+    document: dict
+    names: tuple[str, ...]
+    targets: tuple[str, ...]
+    sd_before: np.ndarray
+    sd_after: np.ndarray
+    sd_standard: np.ndarray
+    duration_s: float
+    criterion: tuple[float, float, float]
+
+    def summary(self) -> str:
+        """What the test is, what it is expected to gain, and why."""
+        segs = self.document["segments"]
+        lines = [
+            f"designed test: {self.document['rate_mm_per_min']:.3g} mm/min, "
+            f"{len(segs)} segments, {self.duration_s:.0f} s, "
+            f"{self.protocol.num_samples} samples",
+        ]
+        for s in segs:
+            lines.append("  " + ", ".join(f"{k} {v:.4g}" for k, v in s.items()))
+        lines += [
+            "",
+            f"{'parameter':<12} {'sd now':>9} {'designed':>9} {'standard':>9}  "
+            "(relative sd; * = target)",
+        ]
+        for i, n in enumerate(self.names):
+            mark = "*" if n in self.targets else " "
+            lines.append(
+                f"{mark}{n[:11]:<11} {self.sd_before[i]:>9.3g} "
+                f"{self.sd_after[i]:>9.3g} {self.sd_standard[i]:>9.3g}"
+            )
+        lines += ["", self.why()]
+        return "\n".join(lines)
+
+    def why(self) -> str:
+        """One paragraph: the expected gain on the targets against the standard
+        protocol, and the information criterion behind it."""
+        idx = [self.names.index(n) for n in self.targets]
+        shrink = self.sd_before[idx] / self.sd_after[idx]
+        standard = self.sd_before[idx] / self.sd_standard[idx]
+        before, designed, std = self.criterion
+        return (
+            f"The least identified parameters ({', '.join(self.targets)}) are the "
+            "targets: the test maximises the information about them (D_s-optimal: "
+            "the log-determinant of their covariance after the test, "
+            f"{before:.2f} now -> {designed:.2f}; Park's 10-cycle protocol of the "
+            f"same duration: {std:.2f}). Their standard deviations shrink by "
+            + ", ".join(f"{a:.2g}x" for a in shrink)
+            + " (standard protocol: "
+            + ", ".join(f"{b:.2g}x" for b in standard)
+            + ")."
+        )
+
+    def to_json(self, path: str | os.PathLike | None = None) -> str:
+        """The protocol file (JSON text), written to `path` when given."""
+        text = json.dumps(self.document, indent=2)
+        if path is not None:
+            write_text_atomic(path, text + "\n")
+        return text
+
+
+def _with_speed(cable: Cable, speed) -> Cable:
+    return eqx.tree_at(lambda c: c.speed, cable, jnp.asarray(speed, cable.speed.dtype))
+
+
+def _precision_after(knowledge: Knowledge, cable: Cable, protocol: Protocol):
+    """The information after a rate-driven test: simulate it (its sample times are
+    solved), then the Fisher information of it as the fit would see it."""
+    traj = simulate_rate_test(knowledge.model, cable, protocol, throw=False)
+    info = information(knowledge, cable, traj.time, protocol.force)
+    return jnp.asarray(knowledge.precision()) + info, traj
+
+
+def _document(cable, speed, levels, holds, rests, layout, why: str) -> dict:
+    segments = []
+    for f, h, r in zip(levels, holds, rests):
+        segments += [
+            {"ramp_to_N": round(float(f), 3), "samples": layout.ramp_samples},
+            {"hold_s": round(float(h), 3), "samples": layout.hold_samples},
+            {"ramp_to_N": 0.0, "samples": layout.ramp_samples},
+            {"rest_s": round(float(r), 3), "samples": layout.hold_samples},
+        ]
+    return {
+        "id": "designed-test",
+        "description": why,
+        "length_mm": round(1e3 * float(cable.length), 6),
+        "diameter_mm": round(1e3 * float(cable.diameter), 6),
+        "rate_mm_per_min": round(float(speed) * 6e4, 4),
+        "segments": segments,
+    }
+
+
+def design_test(
+    fit_or_posterior,
+    *,
+    budget: TestBudget,
+    cable: Cable,
+    targets=None,
+    steps: int = 40,
+    learning_rate: float = 0.15,
+) -> DesignedTest:
+    """Design the next test: the protocol that teaches most about the parameters
+    known least.
+
+    **What is known**: a [`jaxcable.FitResult`][] (its fitted model and linearised
+    covariance) or a [`jaxcable.Posterior`][] (its median model and the covariance
+    of its draws), both on the scale theta (log of a positive parameter), with the
+    posterior's prior (ln 10 on theta) added so that a parameter the data do not
+    determine has a finite variance.
+
+    **The test**: `budget.blocks` blocks, each a ramp to a load level, a hold, a
+    ramp down to 0 N and a rest, at one crosshead speed. Design variables: the
+    levels (up to `budget.max_force_fraction` of the breaking load), the hold and
+    rest durations (shares of the budget's duration left by the ramps) and the
+    speed (in `budget.speed_mm_per_min`); the samples are fixed by `budget.samples`.
+
+    **Criterion**: D_s-optimality. With F the Fisher information of the test (J^T J
+    / sigma^2, J the Jacobian of its elongations in theta through the simulation,
+    the sample times those the tester's speed gives, sigma the elongation noise),
+    minimise log det of the targets' block of (I_now + F)^-1. Adam on the design
+    variables, the gradient through the rate-driven simulation (implicit
+    derivatives of its time solve) and the Jacobian; the ramps' duration is
+    re-estimated between steps.
+
+    **Arguments:**
+
+    - `fit_or_posterior`: what is known.
+    - `budget`: the lab's constraints, a [`jaxcable.TestBudget`][].
+    - `cable`: the cable to test (length, diameter, breaking load; its speed is
+        designed, and is the speed of the standard protocol it is compared with).
+    - `targets`: parameter names to learn about; default the least identified one
+        and those within a factor 3 of its standard deviation (at most 3).
+    - `steps`: optimiser steps.
+    - `learning_rate`: Adam's step on the unconstrained design variables.
+
+    **Returns:**
+
+    A [`DesignedTest`][jaxcable.DesignedTest]: the protocol, its file, and the
+    expected standard deviations with it and with Park's standard protocol.
+    """
+    import optax
+
+    if not isinstance(budget, TestBudget):
+        raise ValueError(
+            f"`budget` must be a jaxcable.TestBudget, got {type(budget).__name__}."
+        )
+    if not isinstance(cable, Cable):
+        raise ValueError(
+            f"`cable` must be a jaxcable.Cable, got {type(cable).__name__}."
+        )
+    if not isinstance(steps, int) or steps < 0:
+        raise ValueError(f"`steps` must be an int >= 0, got {steps!r}.")
+    knowledge = knowledge_of(fit_or_posterior, budget.noise_mm)
+    idx = default_targets(knowledge, targets)
+    layout = Layout.of(budget)
+    breaking = float(cable.breaking_load)
+    k = layout.blocks
+    design = Design(
+        # Near the largest force: the information grows with the load.
+        levels=jnp.linspace(2.0, 1.0, k) if k > 1 else jnp.full(1, 2.0),
+        shares=jnp.zeros(2 * k),
+        speed=jnp.zeros(()),
+    )
+
+    def build(d, ramp_time):
+        protocol, speed, levels, holds, rests = protocol_of(
+            d, layout, budget, breaking, ramp_time
+        )
+        return protocol, _with_speed(cable, speed), levels, holds, rests
+
+    def loss(d, ramp_time):
+        protocol, c, *_ = build(d, ramp_time)
+        precision, traj = _precision_after(knowledge, c, protocol)
+        value = log_det_subset(precision, idx)
+        spent = traj.time[-1] - jnp.sum(protocol.duration)
+        return value, spent
+
+    grad = jax.jit(jax.value_and_grad(loss, has_aux=True))
+    optimiser = optax.apply_if_finite(optax.adam(learning_rate), 5)
+    state = optimiser.init(design)
+    (value, ramp_time), _ = grad(design, 0.0)
+    if not np.isfinite(float(value)):
+        raise ValueError(
+            "`budget`: the starting design fails to simulate (the cable breaks or a "
+            "ramp does not reach its level); lower `max_force_fraction`."
+        )
+    best = (float(value), design, float(ramp_time))
+    for _ in range(steps):
+        (value, spent), g = grad(design, ramp_time)
+        if np.isfinite(float(value)) and float(value) < best[0]:
+            best = (float(value), design, float(ramp_time))
+        if np.isfinite(float(spent)):
+            ramp_time = float(spent)
+        updates, state = optimiser.update(g, state, design)
+        design = optax.apply_updates(design, updates)
+    _, design, ramp_time = best
+    protocol, c, levels, holds, rests = build(design, ramp_time)
+    precision, traj = _precision_after(knowledge, c, protocol)
+    before = np.linalg.inv(knowledge.precision())
+    after = np.linalg.inv(np.asarray(precision))
+    duration = float(traj.time[-1])
+    # The standard protocol: Park's cycles to the largest force at the given cable's
+    # speed (within the tester's range), then a rest that fills the same duration.
+    low, high = budget.speed_mm_per_min
+    usual = _with_speed(cable, np.clip(float(cable.speed), low / 6e4, high / 6e4))
+    cycles = Protocol.cycles(
+        budget.max_force_fraction * breaking, PARK_CYCLES, layout.ramp_samples
+    )
+    cyc = simulate_rate_test(knowledge.model, usual, cycles, throw=False)
+    rest = max(duration - float(cyc.time[-1]), 1.0)
+    standard = Protocol.concatenate(
+        cycles, Protocol.rest(rest, max(2, budget.samples - cycles.num_samples))
+    )
+    std_precision, _ = _precision_after(knowledge, usual, standard)
+    std_cov = np.linalg.inv(np.asarray(std_precision))
+
+    def crit(cov):
+        return float(np.linalg.slogdet(cov[np.ix_(idx, idx)])[1])
+
+    names = knowledge.names
+    target_names = tuple(names[i] for i in idx)
+    result = DesignedTest(
+        protocol=protocol,
+        cable=c,
+        document={},
+        names=names,
+        targets=target_names,
+        sd_before=np.sqrt(np.diag(before)),
+        sd_after=np.sqrt(np.diag(after)),
+        sd_standard=np.sqrt(np.diag(std_cov)),
+        duration_s=duration,
+        criterion=(crit(before), crit(after), crit(std_cov)),
+    )
+    document = _document(
+        cable,
+        c.speed,
+        np.asarray(levels),
+        np.asarray(holds),
+        np.asarray(rests),
+        layout,
+        result.why(),
+    )
+    return dataclasses.replace(result, document=document)

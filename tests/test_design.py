@@ -1,0 +1,94 @@
+"""Test design: a designed test lowers the expected uncertainty, its protocol file
+runs in `jaxcable simulate`, the command line writes it, and the budget's errors
+name their field."""
+
+import json
+
+import numpy as np
+import pytest
+
+import jaxcable as jc
+from jaxcable._cli.main import main
+
+
+pytestmark = pytest.mark.xdist_group("design")
+
+TRUTH = jc.BurgersModel(E1=2.0e9, eta0=3.0e11, E2=4.0e8, eta2=2.0e10)
+CABLE = jc.Cable.from_mm(length_mm=200.0, diameter_mm=3.0, rate_mm_per_min=3.0)
+
+
+@pytest.fixture(scope="module")
+def creep_csv(tmp_path_factory):
+    time = np.concatenate([np.linspace(0.0, 10.0, 6), 10 + np.geomspace(1, 300, 18)])
+    force = np.minimum(time / 10.0, 1.0) * 40.0
+    e = np.asarray(jc.simulate_force_history(TRUTH, CABLE, time, force).elongation)
+    e = e + 2e-6 * np.random.default_rng(0).standard_normal(e.shape)
+    test = jc.TestData(
+        time=time,
+        force=force,
+        elongation=e,
+        metadata={"length_mm": 200.0, "diameter_mm": 3.0, "id": "creep"},
+    )
+    path = tmp_path_factory.mktemp("design") / "creep.csv"
+    jc.write_csv(path, test)
+    return path
+
+
+BUDGET = jc.TestBudget(
+    duration_s=1200.0, max_force_fraction=0.02, samples=16, blocks=1, noise_mm=0.002
+)
+
+
+@pytest.fixture(scope="module")
+def designed(creep_csv):
+    fit = jc.fit(TRUTH, [jc.read_test(creep_csv)], multistart=1)
+    return jc.design_test(fit, budget=BUDGET, cable=CABLE, steps=2)
+
+
+def test_designed_test_teaches(designed, tmp_path):
+    assert np.all(designed.sd_after <= designed.sd_before * (1 + 1e-9))
+    assert designed.criterion[1] < designed.criterion[0]
+    assert designed.targets and set(designed.targets) <= set(designed.names)
+    assert designed.duration_s == pytest.approx(1200.0, rel=0.05)
+    levels = [s["ramp_to_N"] for s in designed.document["segments"][::2]]
+    assert max(levels) <= 0.02 * float(CABLE.breaking_load) + 1e-6
+    low, high = BUDGET.speed_mm_per_min
+    assert low <= designed.document["rate_mm_per_min"] <= high
+    assert "D_s-optimal" in designed.summary()
+    path = tmp_path / "next.json"
+    designed.to_json(path)
+    out = tmp_path / "next.csv"
+    assert main(["simulate", str(path), "--out", str(out)]) == 0
+    assert jc.read_test(out).num_samples == designed.protocol.num_samples
+
+
+def test_design_command(creep_csv, tmp_path, capsys):
+    out = tmp_path / "NEXT.json"
+    args = [
+        "design", str(creep_csv), "--out", str(out), "--model", "burgers",
+        "--duration-s", "1200", "--max-force-fraction", "0.02", "--samples", "16",
+        "--blocks", "1", "--design-steps", "1", "--starts", "1", "--quiet",
+    ]  # fmt: skip
+    assert main(args) == 0
+    doc = json.loads(out.read_text())
+    assert doc["segments"] and doc["length_mm"] == 200.0
+    assert "designed test" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        (dict(duration_s=-1.0), "duration_s"),
+        (dict(duration_s=10.0, max_force_fraction=2.0), "max_force_fraction"),
+        (dict(duration_s=10.0, speed_mm_per_min=(5.0, 1.0)), "speed_mm_per_min"),
+        (dict(duration_s=10.0, samples=3), "samples"),
+    ],
+)
+def test_budget_errors_name_the_field(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        jc.TestBudget(**kwargs)
+
+
+def test_design_rejects_other_inputs():
+    with pytest.raises(ValueError, match="fit_or_posterior"):
+        jc.design_test("fit", budget=BUDGET, cable=CABLE)
