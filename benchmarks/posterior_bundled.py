@@ -29,6 +29,7 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
 import jaxcable as jc  # noqa: E402
+from jaxcable._models import PARK_IDENTIFIABLE  # noqa: E402
 
 
 def _thinned(test: jc.TestData, every: int) -> jc.TestData:
@@ -58,7 +59,7 @@ def main():
     files = sorted(f for f in folder.iterdir() if f.name.endswith(".csv"))
     tests = [_thinned(jc.read_test(f), args.every) for f in files]
     model = jc.IntegratedModel()
-    names = list(jc.PARK_IDENTIFIABLE)
+    names = list(PARK_IDENTIFIABLE)
     t0 = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", jc.IdentifiabilityWarning)

@@ -148,6 +148,7 @@ SLOW_FIRST = (
     # still has up to two tests to run, so the other takes the calibration).
     f"{NOTEBOOK_RUNS}03_diagnose.ipynb]",  # 91 s
     "tests/test_diagnose.py",  # 78 s
+    f"{NOTEBOOK_RUNS}06_uncertainty.ipynb]",  # 50-140 s
     "tests/test_jax_contract.py",  # 54 s
     "tests/test_two_pass.py",  # 52 s
     "tests/test_discover.py",  # 44 s
@@ -161,6 +162,8 @@ SLOW_FIRST = (
     "tests/test_distributed.py",  # 31 s, three processes
     f"{NOTEBOOK_RUNS}05_cdpr.ipynb]",  # 28 s
     "tests/test_integrated.py",  # 27 s
+    "tests/test_posterior.py",  # about 25 s
+    "tests/test_design.py",  # about 22 s
     "tests/test_cache.py",  # 26 s
     "tests/test_extensions.py",  # 25 s
     "tests/test_rate_solver.py",  # 25 s

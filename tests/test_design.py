@@ -11,8 +11,6 @@ import jaxcable as jc
 from jaxcable._cli.main import main
 
 
-pytestmark = pytest.mark.xdist_group("design")
-
 TRUTH = jc.BurgersModel(E1=2.0e9, eta0=3.0e11, E2=4.0e8, eta2=2.0e10)
 CABLE = jc.Cable.from_mm(length_mm=200.0, diameter_mm=3.0, rate_mm_per_min=3.0)
 

@@ -2,6 +2,7 @@
 that recovers the truth and converges, its conversions (summary, PARAMS.json entry,
 CorrelatedParameters for the Monte-Carlo) and argument errors."""
 
+import dataclasses
 import json
 
 import jax
@@ -11,8 +12,6 @@ import pytest
 import jaxcable as jc
 from jaxcable._uncertainty import bulk_ess, split_rhat
 
-
-pytestmark = pytest.mark.xdist_group("posterior")
 
 TRUTH = jc.BurgersModel(E1=2.0e9, eta0=3.0e11, E2=4.0e8, eta2=2.0e10)
 START = jc.BurgersModel(E1=1.5e9, eta0=1.0e11, E2=6.0e8, eta2=1.0e10)
@@ -143,3 +142,14 @@ def test_fit_command_posterior(tmp_path, posterior):
     assert "## Posterior" in (report / "summary.md").read_text()
     # The file still reads as a fit.
     assert jc.FitResult.from_json(out).names == posterior.names
+
+
+def test_summary_says_when_the_chains_did_not_mix(posterior):
+    assert ("NOT CONVERGED" in posterior.summary()) == (not posterior.converged)
+    rhat = posterior.rhat.copy()
+    rhat[1] = 1.3
+    stuck = dataclasses.replace(posterior, rhat=rhat, divergences=7)
+    assert not stuck.converged
+    text = stuck.summary()
+    assert "NOT CONVERGED: R-hat > 1.01 for eta0; 7 divergent draws" in text
+    assert stuck.to_dict()["converged"] is False

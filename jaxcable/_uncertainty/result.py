@@ -150,6 +150,18 @@ class Posterior:
                 f"{r['name'][:12]:<12} {mean:>11.5g} {sd:>10.3g} {lo:>11.5g} "
                 f"{mid:>11.5g} {hi:>11.5g} {rhat:>6.3f} {ess:>6.0f}  {r['unit']}"
             )
+        if not self.converged:
+            # Unmixed chains' quantiles are not the posterior's: say so beside them.
+            unmixed = [n for n, r in zip(self.names, self.rhat) if not r <= 1.01]
+            lines.append(
+                "NOT CONVERGED: "
+                + (f"R-hat > 1.01 for {', '.join(unmixed)}" if unmixed else "")
+                + ("; " if unmixed and self.divergences else "")
+                + (f"{self.divergences} divergent draws" if self.divergences else "")
+                + ". Run longer chains; divergences with a low ESS often mean a "
+                "parameter the data leave flat on one side of a kink (e.g. E1r below "
+                "about E1c in Park's Eq. 9)."
+            )
         return "\n".join(lines)
 
     def to_arviz(self):
