@@ -11,6 +11,7 @@ from .._uncertainty import TestBudget, design_test
 from .common import CliError, progress_meter, require_folder_of
 from .fit import fit_failure, read_described, run_fit, run_posterior
 from .models import names_option, resolve_model
+from .numbers import number, positive_float, positive_int
 from .outputs import refuse_inputs, say_replacing, write_errors
 
 
@@ -26,20 +27,6 @@ DESCRIPTION = (
 )
 
 
-def _number(convert, valid, requirement):
-    def parse(text: str):
-        shown = text if len(text) <= 30 else f"{text[:20]}..."
-        try:
-            value = convert(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{shown!r} is not a number") from None
-        if not valid(value):
-            raise argparse.ArgumentTypeError(f"{shown} {requirement}")
-        return value
-
-    return parse
-
-
 def _speeds(text: str) -> tuple[float, float]:
     parts = text.split(",")
     try:
@@ -53,9 +40,9 @@ def _speeds(text: str) -> tuple[float, float]:
     return low, high
 
 
-_positive = _number(float, lambda v: math.isfinite(v) and v > 0, "must be > 0")
-_fraction = _number(float, lambda v: 0 < v <= 1, "must be in (0, 1]")
-_int = _number(int, lambda v: v >= 1, "must be at least 1")
+_positive = positive_float
+_fraction = number(float, "a number", lambda v: 0 < v <= 1, "must be in (0, 1]")
+_int = positive_int
 
 
 def add_design_command(commands, add_model_options, add_data_options, add_drive):
