@@ -9,6 +9,7 @@ import pytest
 
 import jaxcable as jc
 from jaxcable._cli.main import main
+from jaxcable._uncertainty.discriminate import _lack_of_fit
 
 
 TRUTH = jc.BurgersModel(E1=2.0e9, eta0=3.0e11, E2=4.0e8, eta2=2.0e10)
@@ -38,9 +39,13 @@ BUDGET = jc.TestBudget(
 
 
 @pytest.fixture(scope="module")
-def designed(creep_csv):
-    fit = jc.fit(TRUTH, [jc.read_test(creep_csv)], multistart=1)
-    return jc.design_test(fit, budget=BUDGET, cable=CABLE, steps=2)
+def burgers_fit(creep_csv):
+    return jc.fit(TRUTH, [jc.read_test(creep_csv)], multistart=1)
+
+
+@pytest.fixture(scope="module")
+def designed(burgers_fit):
+    return jc.design_test(burgers_fit, budget=BUDGET, cable=CABLE, steps=2)
 
 
 def test_designed_test_teaches(designed, tmp_path):
@@ -87,6 +92,59 @@ def test_budget_errors_name_the_field(kwargs, match):
         jc.TestBudget(**kwargs)
 
 
-def test_design_rejects_other_inputs():
+def test_design_rejects_other_inputs(burgers_fit):
     with pytest.raises(ValueError, match="fit_or_posterior"):
         jc.design_test("fit", budget=BUDGET, cable=CABLE)
+    with pytest.raises(ValueError, match="candidates"):
+        jc.design_discriminating_test((burgers_fit,), budget=BUDGET, cable=CABLE)
+    with pytest.raises(ValueError, match="targets"):
+        jc.design_test(
+            (burgers_fit, burgers_fit), budget=BUDGET, cable=CABLE, targets=["E1"]
+        )
+
+
+def test_lack_of_fit_is_the_refitted_residual():
+    # What a linear candidate keeps of a difference after moving its parameters,
+    # held by a prior precision: the minimum of the penalised least squares.
+    rng = np.random.default_rng(3)
+    jac, diff = rng.standard_normal((30, 3)), rng.standard_normal(30)
+    precision, sigma = np.diag([0.5, 2.0, 1.0]), 0.7
+    a = jac.T @ jac / sigma**2 + precision
+    step = np.linalg.solve(a, jac.T @ diff / sigma**2)
+    direct = np.sum((diff - jac @ step) ** 2) / sigma**2 + step @ precision @ step
+    value = float(_lack_of_fit(diff, jac, precision, sigma))
+    assert value == pytest.approx(direct, rel=1e-10)
+    assert 0 < value < diff @ diff / sigma**2
+    # A difference the candidate can follow freely leaves nothing.
+    free = float(_lack_of_fit(jac @ [1.0, -2.0, 0.5], jac, 0 * precision, sigma))
+    assert abs(free) < 1e-8
+
+
+@pytest.fixture(scope="module")
+def separating(burgers_fit, creep_csv):
+    # A rival that cannot creep: the test that separates it from Burgers holds the
+    # load.
+    hooke = jc.fit(jc.HookeModel(), [jc.read_test(creep_csv)], multistart=1)
+    return jc.design_test((burgers_fit, hooke), budget=BUDGET, cable=CABLE, steps=2)
+
+
+def test_discriminating_test_separates(separating, tmp_path):
+    assert separating.candidates == ("BurgersModel", "HookeModel")
+    t_ab, t_ba = separating.separation
+    assert np.isfinite(t_ab) and np.isfinite(t_ba) and min(t_ab, t_ba) > 0
+    # BIC(Hooke) - BIC(Burgers) now, plus T, plus the penalty of Burgers' three
+    # more parameters growing with the new samples.
+    now, n, grow = separating.bic_now, separating.samples_before, separating.samples
+    assert now > 10 and n == 24
+    penalty = 3 * np.log((n + grow) / n)
+    assert separating.expected_delta_bic() == pytest.approx(
+        (now + t_ab - penalty, -now + t_ba + penalty)
+    )
+    assert separating.duration_s == pytest.approx(1200.0, rel=0.05)
+    text = separating.summary()
+    assert "T-optimal" in text and "HookeModel is true" in text
+    path = tmp_path / "separate.json"
+    separating.to_json(path)
+    out = tmp_path / "separate.csv"
+    assert main(["simulate", str(path), "--out", str(out)]) == 0
+    assert jc.read_test(out).num_samples == separating.protocol.num_samples

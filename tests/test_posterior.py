@@ -146,7 +146,7 @@ def test_fit_command_posterior(tmp_path, posterior):
 
 def test_summary_says_when_the_chains_did_not_mix(posterior):
     assert ("NOT CONVERGED" in posterior.summary()) == (not posterior.converged)
-    rhat = posterior.rhat.copy()
+    rhat = np.ones_like(posterior.rhat)
     rhat[1] = 1.3
     stuck = dataclasses.replace(posterior, rhat=rhat, divergences=7)
     assert not stuck.converged

@@ -5,10 +5,13 @@ run."""
 import argparse
 import math
 
+import jax
 import numpy as np
 
+from .._models import EXTENSIONS
 from .._uncertainty import TestBudget, design_test
 from .common import CliError, progress_meter, require_folder_of
+from .diagnose import run_diagnosis
 from .fit import fit_failure, read_described, run_fit, run_posterior
 from .models import names_option, resolve_model
 from .numbers import number, positive_float, positive_int
@@ -23,7 +26,9 @@ DESCRIPTION = (
     "jaxcable.design_test), within the lab's limits: total duration, largest force "
     "as a fraction of the breaking load, speed range, samples. Writes the test as "
     "a protocol file and prints what it is expected to gain beside Park's "
-    "standard 10-cycle protocol of the same duration, and why."
+    "standard 10-cycle protocol of the same duration, and why. With --separate "
+    "A,B: the test that best tells two candidate causes apart after a diagnosis "
+    "(T-optimal)."
 )
 
 
@@ -107,6 +112,14 @@ def add_design_command(commands, add_model_options, add_data_options, add_drive)
         help="elongation noise, mm (default: the fit's RMS residual)",
     )
     lab.add_argument("--targets", metavar="NAMES", help="parameters to learn about")
+    lab.add_argument(
+        "--separate",
+        metavar="ID,ID",
+        help="instead, the test that best separates two candidate causes (extension "
+        "ids, as 'jaxcable diagnose --candidates'): both are fitted by a diagnosis "
+        "of the data, then the test is designed to tell them apart "
+        "(jaxcable.design_discriminating_test)",
+    )
     lab.add_argument("--design-steps", type=_int, default=40, metavar="N")
 
 
@@ -119,7 +132,27 @@ def design_command(args) -> int:
     require_folder_of(args.out, "--out")
     refuse_inputs([("--out", args.out)], [("DATA.csv", str(p)) for p in args.data])
     args.per_test = None
+    separate = _pair(args.separate, targets)
     tests, drives = read_described(args, meter)
+    if separate:
+        known = run_diagnosis(
+            model,
+            name,
+            tests,
+            meter=meter,
+            fit_names=fit_names,
+            candidates=separate,
+            multistart=args.starts,
+            max_steps=args.max_steps,
+            key=jax.random.key(args.seed),
+            drive=[d.drive for d in drives],
+            discover=False,
+            max_rounds=1,
+        )
+        print()
+        print(known.summary())
+        print()
+        return _design_and_write(known, tests, args, None)
     result = run_fit(
         model,
         name,
@@ -141,6 +174,28 @@ def design_command(args) -> int:
         known = run_posterior(model, name, tests, fit_names, args, drives, result)
         print(known.summary())
         print()
+    return _design_and_write(known, tests, args, targets)
+
+
+def _pair(text: str | None, targets) -> list[str] | None:
+    """The two extension ids of `--separate` (command-line names accepted)."""
+    if text is None:
+        return None
+    by_cli = {cls.CLI_NAME: key for key, cls in EXTENSIONS.items()}
+    ids = [by_cli.get(t.strip(), t.strip()) for t in text.split(",")]
+    if len(ids) != 2 or len(set(ids)) != 2 or not set(ids) <= set(EXTENSIONS):
+        raise CliError(
+            f"--separate: give two different extension ids of {list(EXTENSIONS)}, "
+            f"got {text!r}."
+        )
+    if targets:
+        raise CliError("--targets: a test that separates two causes has no targets.")
+    return ids
+
+
+def _design_and_write(known, tests, args, targets) -> int:
+    """Design from `known` (a fit, a posterior or a diagnosis), print the summary
+    and write --out; the exit status."""
     try:
         budget = TestBudget(
             duration_s=args.duration_s,
@@ -160,7 +215,8 @@ def design_command(args) -> int:
     except ValueError as e:
         raise CliError(f"cannot design the test: {e}") from None
     print(designed.summary())
-    if not np.all(np.isfinite(designed.sd_after)):
+    simulated = getattr(designed, "sd_after", getattr(designed, "separation", None))
+    if not np.all(np.isfinite(simulated)):
         raise CliError("the designed test did not simulate.", status=1)
     say_replacing([args.out], "--out")
     with write_errors("--out", args.out):

@@ -11,17 +11,21 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._cable import Cable
-from .._drive import Protocol, simulate_force_history
+from .._drive import Protocol, simulate_force_history, simulate_rate_test
 from .._fit import FitResult, field_at
-from .._models import AbstractCableModel
+from .._models import AbstractCableModel, parameter_info
 from .budget import TestBudget
 from .priors import PRIOR_SCALE
 from .result import Posterior
 
 
+# Park's standard protocol: 10 load-unload cycles (Park et al., Section 2.1).
+PARK_CYCLES = 10
+
+
 @dataclasses.dataclass(frozen=True)
 class Knowledge:
-    """What is known before the next test, on the scale theta (log x for a positive
+    """What is known before the next test, on the scale theta (log x for a log-scaled
     parameter, x otherwise): the reference model, the names, their values and
     covariance in theta, and the elongation noise of a force-driven test (m)."""
 
@@ -34,7 +38,7 @@ class Knowledge:
 
     @property
     def sd(self) -> np.ndarray:
-        """Standard deviation of each theta (relative for a positive parameter)."""
+        """Standard deviation of each theta (relative for a log-scaled parameter)."""
         return np.sqrt(np.clip(np.diag(self.covariance), 0.0, None))
 
     def precision(self) -> np.ndarray:
@@ -61,6 +65,20 @@ class Knowledge:
         return np.where(self.log, np.log(np.abs(self.values)), self.values)
 
 
+def _log_scaled(model, names, values) -> np.ndarray:
+    """Which parameters theta holds as logarithms: the positive ones a fit
+    reparameterises by log (a signed effect, such as a drift rate, stays linear, so
+    that the linearisation can take it through 0)."""
+    out = []
+    for name, value in zip(names, values):
+        *path, field = name.split(".")
+        owner = field_at(model, ".".join(path)) if path else model
+        info = parameter_info(type(owner), field)
+        transform = "log" if info is None else info.transform
+        out.append(value > 0 and transform in ("log", "log1"))
+    return np.array(out, bool)
+
+
 def knowledge_of(source, noise_mm: float | None) -> Knowledge:
     """The `Knowledge` of a [`jaxcable.FitResult`][] or a [`jaxcable.Posterior`][];
     `noise_mm` overrides the noise read from the fit."""
@@ -70,7 +88,7 @@ def knowledge_of(source, noise_mm: float | None) -> Knowledge:
         names = tuple(source.names)
         flat = source.flat
         values = np.median(flat, axis=0)
-        log = values > 0
+        log = _log_scaled(model, names, values)
         theta = np.where(log, np.log(np.where(log, flat, 1.0)), flat)
         cov = np.atleast_2d(np.cov(theta, rowvar=False))
     elif isinstance(source, FitResult):
@@ -78,7 +96,7 @@ def knowledge_of(source, noise_mm: float | None) -> Knowledge:
         model = source.model
         names = tuple(source.names)
         values = np.asarray(source.values, float)
-        log = values > 0
+        log = _log_scaled(model, names, values)
         s = np.where(log, values, 1.0)
         cov = np.asarray(source.covariance, float) / np.outer(s, s)
     else:
@@ -136,6 +154,96 @@ class Design(eqx.Module):
     levels: jax.Array
     shares: jax.Array
     speed: jax.Array
+
+    @classmethod
+    def start(cls, layout: Layout) -> "Design":
+        """The first design: levels near the largest force (the information grows
+        with the load), equal holds and rests, the middle of the speed range."""
+        k = layout.blocks
+        return cls(
+            levels=jnp.linspace(2.0, 1.0, k) if k > 1 else jnp.full(1, 2.0),
+            shares=jnp.zeros(2 * k),
+            speed=jnp.zeros(()),
+        )
+
+
+def with_speed(cable: Cable, speed) -> Cable:
+    """`cable` at the crosshead `speed` (m/s, traceable)."""
+    return eqx.tree_at(lambda c: c.speed, cable, jnp.asarray(speed, cable.speed.dtype))
+
+
+def optimise(loss, design: Design, steps: int, learning_rate: float):
+    """Adam on `design` for `loss(design, ramp_time) -> (value, spent)`, `spent` the
+    ramps' duration the simulation found (s), which the next step's protocol
+    assumes; the best design seen and its ramp time.
+
+    **Raises:**
+
+    `ValueError` (on `budget`) when the starting design fails to simulate.
+    """
+    import optax
+
+    grad = jax.jit(jax.value_and_grad(loss, has_aux=True))
+    optimiser = optax.apply_if_finite(optax.adam(learning_rate), 5)
+    state = optimiser.init(design)
+    (value, ramp_time), _ = grad(design, 0.0)
+    if not np.isfinite(float(value)):
+        raise ValueError(
+            "`budget`: the starting design fails to simulate (the cable breaks or a "
+            "ramp does not reach its level); lower `max_force_fraction`."
+        )
+    best = (float(value), design, float(ramp_time))
+    for _ in range(steps):
+        (value, spent), g = grad(design, ramp_time)
+        if np.isfinite(float(value)) and float(value) < best[0]:
+            best = (float(value), design, float(ramp_time))
+        if np.isfinite(float(spent)):
+            ramp_time = float(spent)
+        updates, state = optimiser.update(g, state, design)
+        design = optax.apply_updates(design, updates)
+    return best[1], best[2]
+
+
+def standard_protocol(model, cable: Cable, budget: TestBudget, duration: float):
+    """Park's standard protocol of the same duration, the designed test's yardstick:
+    `PARK_CYCLES` cycles to the budget's largest force at `cable`'s speed (clipped
+    to the tester's range), then a rest that fills `duration` (s). Returns
+    `(protocol, cable at that speed)`."""
+    layout = Layout.of(budget)
+    low, high = budget.speed_mm_per_min
+    usual = with_speed(cable, np.clip(float(cable.speed), low / 6e4, high / 6e4))
+    cycles = Protocol.cycles(
+        budget.max_force_fraction * float(cable.breaking_load),
+        PARK_CYCLES,
+        layout.ramp_samples,
+    )
+    cyc = simulate_rate_test(model, usual, cycles, throw=False)
+    rest = max(duration - float(cyc.time[-1]), 1.0)
+    standard = Protocol.concatenate(
+        cycles, Protocol.rest(rest, max(2, budget.samples - cycles.num_samples))
+    )
+    return standard, usual
+
+
+def protocol_document(cable, speed, levels, holds, rests, layout, why: str) -> dict:
+    """The protocol file of a design (`jaxcable simulate` runs it): its blocks'
+    levels (N), holds and rests (s), at the crosshead `speed` (m/s)."""
+    segments = []
+    for f, h, r in zip(levels, holds, rests):
+        segments += [
+            {"ramp_to_N": round(float(f), 3), "samples": layout.ramp_samples},
+            {"hold_s": round(float(h), 3), "samples": layout.hold_samples},
+            {"ramp_to_N": 0.0, "samples": layout.ramp_samples},
+            {"rest_s": round(float(r), 3), "samples": layout.hold_samples},
+        ]
+    return {
+        "id": "designed-test",
+        "description": why,
+        "length_mm": round(1e3 * float(cable.length), 6),
+        "diameter_mm": round(1e3 * float(cable.diameter), 6),
+        "rate_mm_per_min": round(float(speed) * 6e4, 4),
+        "segments": segments,
+    }
 
 
 def protocol_of(

@@ -6,8 +6,6 @@ import dataclasses
 import json
 import os
 
-import equinox as eqx
-import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -23,12 +21,13 @@ from .design import (
     information,
     knowledge_of,
     log_det_subset,
+    optimise,
+    protocol_document,
     protocol_of,
+    standard_protocol,
+    with_speed,
 )
-
-
-# Park's standard protocol: 10 load-unload cycles (Park et al., Section 2.1).
-PARK_CYCLES = 10
+from .discriminate import DiscriminatingTest, design_discriminating_test
 
 
 @dataclasses.dataclass(frozen=True)
@@ -115,35 +114,12 @@ class DesignedTest:
         return text
 
 
-def _with_speed(cable: Cable, speed) -> Cable:
-    return eqx.tree_at(lambda c: c.speed, cable, jnp.asarray(speed, cable.speed.dtype))
-
-
 def _precision_after(knowledge: Knowledge, cable: Cable, protocol: Protocol):
     """The information after a rate-driven test: simulate it (its sample times are
     solved), then the Fisher information of it as the fit would see it."""
     traj = simulate_rate_test(knowledge.model, cable, protocol, throw=False)
     info = information(knowledge, cable, traj.time, protocol.force)
     return jnp.asarray(knowledge.precision()) + info, traj
-
-
-def _document(cable, speed, levels, holds, rests, layout, why: str) -> dict:
-    segments = []
-    for f, h, r in zip(levels, holds, rests):
-        segments += [
-            {"ramp_to_N": round(float(f), 3), "samples": layout.ramp_samples},
-            {"hold_s": round(float(h), 3), "samples": layout.hold_samples},
-            {"ramp_to_N": 0.0, "samples": layout.ramp_samples},
-            {"rest_s": round(float(r), 3), "samples": layout.hold_samples},
-        ]
-    return {
-        "id": "designed-test",
-        "description": why,
-        "length_mm": round(1e3 * float(cable.length), 6),
-        "diameter_mm": round(1e3 * float(cable.diameter), 6),
-        "rate_mm_per_min": round(float(speed) * 6e4, 4),
-        "segments": segments,
-    }
 
 
 def design_test(
@@ -154,13 +130,14 @@ def design_test(
     targets=None,
     steps: int = 40,
     learning_rate: float = 0.15,
-) -> DesignedTest:
+) -> "DesignedTest | DiscriminatingTest":
     """Design the next test: the protocol that teaches most about the parameters
-    known least.
+    known least, or, after an ambiguous diagnosis, the one that best separates its
+    two leading candidates.
 
     **What is known**: a [`jaxcable.FitResult`][] (its fitted model and linearised
     covariance) or a [`jaxcable.Posterior`][] (its median model and the covariance
-    of its draws), both on the scale theta (log of a positive parameter), with the
+    of its draws), both on the scale theta (log of a parameter a fit log-scales), with the
     posterior's prior (ln 10 on theta) added so that a parameter the data do not
     determine has a finite variance.
 
@@ -178,9 +155,14 @@ def design_test(
     derivatives of its time solve) and the Jacobian; the ramps' duration is
     re-estimated between steps.
 
+    **After a diagnosis**: given a [`jaxcable.Diagnosis`][] (or two fits as a
+    tuple), the test separates its two candidates of lowest ΔBIC instead
+    ([`jaxcable.design_discriminating_test`][], T-optimal); `targets` must then be
+    None.
+
     **Arguments:**
 
-    - `fit_or_posterior`: what is known.
+    - `fit_or_posterior`: what is known; or a diagnosis, or two fits.
     - `budget`: the lab's constraints, a [`jaxcable.TestBudget`][].
     - `cable`: the cable to test (length, diameter, breaking load; its speed is
         designed, and is the speed of the standard protocol it is compared with).
@@ -192,10 +174,24 @@ def design_test(
     **Returns:**
 
     A [`DesignedTest`][jaxcable.DesignedTest]: the protocol, its file, and the
-    expected standard deviations with it and with Park's standard protocol.
+    expected standard deviations with it and with Park's standard protocol (a
+    [`jaxcable.DiscriminatingTest`][] after a diagnosis).
     """
-    import optax
+    from .._diagnose import Diagnosis
 
+    if isinstance(fit_or_posterior, (Diagnosis, tuple, list)):
+        if targets is not None:
+            raise ValueError(
+                "`targets`: a test that separates two candidates has no target "
+                "parameters; leave it None."
+            )
+        return design_discriminating_test(
+            fit_or_posterior,
+            budget=budget,
+            cable=cable,
+            steps=steps,
+            learning_rate=learning_rate,
+        )
     if not isinstance(budget, TestBudget):
         raise ValueError(
             f"`budget` must be a jaxcable.TestBudget, got {type(budget).__name__}."
@@ -210,19 +206,13 @@ def design_test(
     idx = default_targets(knowledge, targets)
     layout = Layout.of(budget)
     breaking = float(cable.breaking_load)
-    k = layout.blocks
-    design = Design(
-        # Near the largest force: the information grows with the load.
-        levels=jnp.linspace(2.0, 1.0, k) if k > 1 else jnp.full(1, 2.0),
-        shares=jnp.zeros(2 * k),
-        speed=jnp.zeros(()),
-    )
+    design = Design.start(layout)
 
     def build(d, ramp_time):
         protocol, speed, levels, holds, rests = protocol_of(
             d, layout, budget, breaking, ramp_time
         )
-        return protocol, _with_speed(cable, speed), levels, holds, rests
+        return protocol, with_speed(cable, speed), levels, holds, rests
 
     def loss(d, ramp_time):
         protocol, c, *_ = build(d, ramp_time)
@@ -231,42 +221,13 @@ def design_test(
         spent = traj.time[-1] - jnp.sum(protocol.duration)
         return value, spent
 
-    grad = jax.jit(jax.value_and_grad(loss, has_aux=True))
-    optimiser = optax.apply_if_finite(optax.adam(learning_rate), 5)
-    state = optimiser.init(design)
-    (value, ramp_time), _ = grad(design, 0.0)
-    if not np.isfinite(float(value)):
-        raise ValueError(
-            "`budget`: the starting design fails to simulate (the cable breaks or a "
-            "ramp does not reach its level); lower `max_force_fraction`."
-        )
-    best = (float(value), design, float(ramp_time))
-    for _ in range(steps):
-        (value, spent), g = grad(design, ramp_time)
-        if np.isfinite(float(value)) and float(value) < best[0]:
-            best = (float(value), design, float(ramp_time))
-        if np.isfinite(float(spent)):
-            ramp_time = float(spent)
-        updates, state = optimiser.update(g, state, design)
-        design = optax.apply_updates(design, updates)
-    _, design, ramp_time = best
+    design, ramp_time = optimise(loss, design, steps, learning_rate)
     protocol, c, levels, holds, rests = build(design, ramp_time)
     precision, traj = _precision_after(knowledge, c, protocol)
     before = np.linalg.inv(knowledge.precision())
     after = np.linalg.inv(np.asarray(precision))
     duration = float(traj.time[-1])
-    # The standard protocol: Park's cycles to the largest force at the given cable's
-    # speed (within the tester's range), then a rest that fills the same duration.
-    low, high = budget.speed_mm_per_min
-    usual = _with_speed(cable, np.clip(float(cable.speed), low / 6e4, high / 6e4))
-    cycles = Protocol.cycles(
-        budget.max_force_fraction * breaking, PARK_CYCLES, layout.ramp_samples
-    )
-    cyc = simulate_rate_test(knowledge.model, usual, cycles, throw=False)
-    rest = max(duration - float(cyc.time[-1]), 1.0)
-    standard = Protocol.concatenate(
-        cycles, Protocol.rest(rest, max(2, budget.samples - cycles.num_samples))
-    )
+    standard, usual = standard_protocol(knowledge.model, cable, budget, duration)
     std_precision, _ = _precision_after(knowledge, usual, standard)
     std_cov = np.linalg.inv(np.asarray(std_precision))
 
@@ -287,7 +248,7 @@ def design_test(
         duration_s=duration,
         criterion=(crit(before), crit(after), crit(std_cov)),
     )
-    document = _document(
+    document = protocol_document(
         cable,
         c.speed,
         np.asarray(levels),

@@ -19,6 +19,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
 from jaxtyping import Array, Float, PRNGKeyArray
 
 from .._progress import AbstractProgressMeter, NoProgressMeter
@@ -170,12 +171,31 @@ def make_runner(max_doublings: int):
     return init, run
 
 
+def _spread(positions: Array) -> Array:
+    """`positions` `(chains, p)` laid out over as many of `jax.devices()` as divide
+    the number of chains, one block of chains each: the vmapped chains' program is
+    then partitioned by XLA over the devices (on a CPU whose cores are exposed as
+    devices, `XLA_FLAGS=--xla_force_host_platform_device_count=N`, one core each).
+    The draws are the same computation wherever it runs."""
+    devices = jax.devices()
+    count = max(d for d in range(1, len(devices) + 1) if positions.shape[0] % d == 0)
+    if count == 1:
+        return positions
+    mesh = Mesh(np.array(devices[:count]), ("chains",))
+    return jax.device_put(positions, NamedSharding(mesh, P("chains")))
+
+
 def _regularised_covariance(draws: np.ndarray, fallback: np.ndarray) -> np.ndarray:
-    """The covariance of `draws` `(n, p)`, shrunk towards the diagonal of `fallback`
-    as Stan shrinks towards a small identity (weight 5 / (n + 5)): the parameters'
-    scales differ by decades, so the fallback's own diagonal is the neutral target."""
-    n = draws.shape[0]
-    cov = np.cov(draws, rowvar=False).reshape(fallback.shape)
+    """The within-chain covariance of `draws` `(steps, chains, p)` (the mean of each
+    chain's own: chains still apart after a short warm-up would otherwise widen the
+    metric by their distance, and the step size collapses), shrunk towards the
+    diagonal of `fallback` as Stan shrinks towards a small identity (weight
+    5 / (n + 5), n the draws): the parameters' scales differ by decades, so the
+    fallback's own diagonal is the neutral target."""
+    steps, chains, p = draws.shape
+    per_chain = [np.cov(draws[:, c], rowvar=False).reshape(p, p) for c in range(chains)]
+    cov = np.mean(per_chain, axis=0)
+    n = steps * chains
     return (n / (n + 5.0)) * cov + (5.0 / (n + 5.0)) * np.diag(np.diag(fallback))
 
 
@@ -201,7 +221,7 @@ def run_chains(
 
     Warm-up, in chunks of `CHUNK` steps (`num_warmup` rounded up): the first half
     adapts the step size with the given metric; the metric is then re-estimated as
-    the covariance of the chains' draws of the second quarter (pooled), and the
+    the within-chain covariance of the draws of the second quarter, and the
     second half adapts the step size again with it. Sampling keeps the final
     step size (dual averaging's averaged iterate) and metric.
 
@@ -225,7 +245,8 @@ def run_chains(
     (integration steps per draw).
     """
     init, run = make_runner(max_doublings)
-    states = init(density, jnp.asarray(start))
+    start = _spread(jnp.asarray(start))
+    states = init(density, start)
     ok = np.isfinite(np.asarray(states.logdensity))
     if not np.all(ok):
         # A chain whose start is outside the model's domain starts where the first
@@ -233,7 +254,7 @@ def run_chains(
         if not np.any(ok):
             raise ValueError("no chain's start has a finite posterior density.")
         fixed = np.where(ok[:, None], np.asarray(start), np.asarray(start)[ok][0])
-        states = init(density, jnp.asarray(fixed))
+        states = init(density, _spread(jnp.asarray(fixed)))
     chunks = max(2, -(-num_warmup // CHUNK))
     first = chunks // 2
     dual = _dual_averaging_init(initial_step)
@@ -245,9 +266,8 @@ def run_chains(
         for i in range(chunks):
             if i == first:
                 # The second quarter of the warm-up has left the start behind.
-                pooled = np.concatenate(history[first // 2 :], axis=0)
-                pooled = pooled.reshape(-1, pooled.shape[-1])
-                mass = jnp.asarray(_regularised_covariance(pooled, np.asarray(mass)))
+                window = np.concatenate(history[first // 2 :], axis=0)
+                mass = jnp.asarray(_regularised_covariance(window, np.asarray(mass)))
                 dual = _dual_averaging_init(float(np.exp(dual.log_step_bar)))
             states, dual, out = run(
                 density, states, keys[i], dual, mass, never, jnp.asarray(True), target

@@ -23,6 +23,7 @@ from .._io import force_noise
 from .._models import AbstractCableModel
 from .._progress import AbstractProgressMeter, NoProgressMeter
 from .diagnostics import bulk_ess, split_rhat
+from .mode import posterior_mode
 from .nuts import run_chains
 from .priors import (
     PRIOR_SCALE,
@@ -196,10 +197,12 @@ def sample_posterior(
     data are not used twice.
 
     **Sampler.** BlackJAX's NUTS kernel (multinomial, iterative), the chains vmapped
-    in one compiled program; the gradient of the log density is taken through the
-    simulation in forward mode. The chains start from draws of the least-squares
-    fit's Laplace approximation (its covariance in u, the prior's curvature added),
-    which is also the first dense metric; the warm-up adapts the step size by dual
+    in one compiled program (laid out over the devices when there are several: see
+    `jaxcable.monte_carlo`); the gradient of the log density is taken through the
+    simulation in forward mode. The chains start at the posterior's mode (BFGS on
+    the log density from the least-squares fit, whose Laplace covariance in u, the
+    prior's curvature added, whitens it) and at draws of the Laplace approximation
+    there (the inverse Hessian at the mode), which is also the first dense metric; the warm-up adapts the step size by dual
     averaging (target acceptance 0.8), re-estimates the dense metric from the
     chains' draws half-way, and adapts the step size again. R-hat and the effective
     sample size per parameter are the rank-normalised split R-hat and bulk ESS of
@@ -286,10 +289,11 @@ def sample_posterior(
         problem, sigma, jnp.asarray(center), noise, float(prior_scale)
     )
     cov = _laplace(start, problem, u_hat, float(prior_scale))
+    u_hat, cov = posterior_mode(density, u_hat, cov)
     key_start, key_run = jax.random.split(key)
     z = np.asarray(jax.random.normal(key_start, (num_chains, len(u_hat))))
-    # The first chain starts at the optimum, the others at draws of the Laplace
-    # approximation (one outside the model's domain is moved to the optimum).
+    # The first chain starts at the mode, the others at draws of the Laplace
+    # approximation there (one outside the model's domain is moved to the mode).
     positions = u_hat + z @ np.linalg.cholesky(cov).T
     positions[0] = u_hat
     run = run_chains(

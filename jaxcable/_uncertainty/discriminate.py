@@ -1,0 +1,332 @@
+"""The next test after an ambiguous diagnosis: the protocol that best separates two
+candidate models, `jaxcable.design_discriminating_test`."""
+
+import dataclasses
+import json
+import math
+import os
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._cable import Cable
+from .._drive import Protocol, simulate_force_history, simulate_rate_test
+from .._files import write_text_atomic
+from .._fit import FitResult
+from .budget import TestBudget
+from .design import (
+    Design,
+    Knowledge,
+    Layout,
+    knowledge_of,
+    optimise,
+    protocol_document,
+    protocol_of,
+    standard_protocol,
+    with_speed,
+)
+
+
+@dataclasses.dataclass(frozen=True)
+class DiscriminatingTest:
+    """The outcome of [`jaxcable.design_discriminating_test`][].
+
+    **Fields:**
+
+    - `protocol`: the designed test, a [`jaxcable.Protocol`][].
+    - `cable`: the cable at the designed crosshead speed.
+    - `document`: the protocol file (a dict; `to_json` writes it).
+    - `candidates`: the two candidates' names `(a, b)`.
+    - `parameters`: each candidate's number of fitted parameters.
+    - `bic_now`: BIC(b) - BIC(a) on the data so far (a diagnosis's training
+        samples; NaN when not known): > 0 favours a.
+    - `separation`: `(T_ab, T_ba)` of the designed test: T_ab the lack of fit,
+        in noise units (a sum of squared residuals over sigma^2), that b keeps
+        when a is true and b is refitted to the new test and the old data
+        together (linearised), T_ba the converse.
+    - `separation_standard`: the same for Park's 10-cycle protocol of the same
+        duration and largest force.
+    - `samples`: samples of the designed test.
+    - `samples_before`: samples of the data so far (those `bic_now` counts).
+    - `duration_s`: its simulated duration, s.
+    - `noise_m`: the elongation noise the separations are in units of, m.
+    """
+
+    protocol: Protocol
+    cable: Cable
+    document: dict
+    candidates: tuple[str, str]
+    parameters: tuple[int, int]
+    bic_now: float
+    separation: tuple[float, float]
+    separation_standard: tuple[float, float]
+    samples: int
+    samples_before: int
+    duration_s: float
+    noise_m: float
+
+    def expected_delta_bic(self, standard: bool = False) -> tuple[float, float]:
+        """The expected BIC(wrong) - BIC(true) after the test: `(if a is true, if b
+        is true)`. The BIC difference so far (NaN counts as 0), plus the
+        separation (a chi-square's excess: the wrong model's sum of squares grows
+        by T sigma^2), plus the growth of the parameters' penalty k ln n with the
+        new samples, (k_wrong - k_true) ln((n_before + n_new) / n_before)."""
+        t_ab, t_ba = self.separation_standard if standard else self.separation
+        now = 0.0 if math.isnan(self.bic_now) else self.bic_now
+        ka, kb = self.parameters
+        before = max(self.samples_before, 1)
+        grow = math.log((before + self.samples) / before)
+        return (now + t_ab + (kb - ka) * grow, -now + t_ba + (ka - kb) * grow)
+
+    def summary(self) -> str:
+        """What the test is, how well it is expected to separate the two
+        candidates, and why."""
+        segs = self.document["segments"]
+        a, b = self.candidates
+        lines = [
+            f"discriminating test: {a} against {b}",
+            f"  {self.document['rate_mm_per_min']:.3g} mm/min, {len(segs)} segments, "
+            f"{self.duration_s:.0f} s, {self.samples} samples",
+        ]
+        for s in segs:
+            lines.append("  " + ", ".join(f"{k} {v:.4g}" for k, v in s.items()))
+        designed = self.expected_delta_bic()
+        standard = self.expected_delta_bic(standard=True)
+        lines += [
+            "",
+            f"{'expected BIC(wrong) - BIC(true)':<34} {'designed':>9} {'standard':>9}",
+            f"{'  if ' + a + ' is true':<34} {designed[0]:>9.1f} {standard[0]:>9.1f}",
+            f"{'  if ' + b + ' is true':<34} {designed[1]:>9.1f} {standard[1]:>9.1f}",
+            "",
+            self.why(),
+        ]
+        return "\n".join(lines)
+
+    def why(self) -> str:
+        """One paragraph: the criterion and the expected separation."""
+        a, b = self.candidates
+        designed = min(self.expected_delta_bic())
+        standard = min(self.expected_delta_bic(standard=True))
+        now = "unknown" if math.isnan(self.bic_now) else f"{self.bic_now:+.1f}"
+        verdict = (
+            "enough to separate them (>= 10, very strong evidence) whichever is true"
+            if designed >= 10
+            else "not enough for very strong evidence (10): a longer test, a larger "
+            "force or a second test is needed"
+        )
+        return (
+            f"The two candidates {a} and {b} explain the data so far about equally "
+            f"(BIC({b}) - BIC({a}) = {now}). The test maximises the smaller of the "
+            "two lack-of-fit sums (T-optimal: the wrong candidate refitted to what "
+            "the true one predicts, old data included, linearised), so that it "
+            "separates them whichever is true: the expected BIC difference in "
+            f"favour of the true one is at least {designed:.1f} ({verdict}); Park's "
+            f"10-cycle protocol of the same duration: {standard:.1f}."
+        )
+
+    def to_json(self, path: str | os.PathLike | None = None) -> str:
+        """The protocol file (JSON text), written to `path` when given."""
+        text = json.dumps(self.document, indent=2)
+        if path is not None:
+            write_text_atomic(path, text + "\n")
+        return text
+
+
+def _response(knowledge: Knowledge, cable: Cable, time, force):
+    """The elongations (m) of a force history and their Jacobian in theta."""
+
+    def elongation(theta):
+        traj = simulate_force_history(
+            knowledge.with_theta(theta), cable, time, force, throw=False
+        )
+        return traj.elongation, traj.elongation
+
+    jac, value = jax.jacfwd(elongation, has_aux=True)(jnp.asarray(knowledge.theta))
+    return value, jac
+
+
+def _lack_of_fit(difference, jac, precision, sigma):
+    """min over d of |difference - jac d|^2 / sigma^2 + d^T precision d: what a
+    candidate cannot absorb of another's prediction by moving its parameters, held
+    by what the old data (and the prior) know of them."""
+    g = jac.T @ difference / sigma**2
+    a = jac.T @ jac / sigma**2 + precision
+    return difference @ difference / sigma**2 - g @ jnp.linalg.solve(a, g)
+
+
+def separations(first: Knowledge, second: Knowledge, cable: Cable, time, force, sigma):
+    """`(T_ab, T_ba)` of one force history (s, N): see `DiscriminatingTest`."""
+    ea, ja = _response(first, cable, time, force)
+    eb, jb = _response(second, cable, time, force)
+    d = ea - eb
+    t_ab = _lack_of_fit(d, jb, jnp.asarray(second.precision()), sigma)
+    t_ba = _lack_of_fit(-d, ja, jnp.asarray(first.precision()), sigma)
+    return t_ab, t_ba
+
+
+def _bic(fit: FitResult) -> float:
+    """BIC = n ln(SSR / n) + k ln n of a fit of force-driven tests (SSR in m^2 over
+    its n samples); NaN when a test is scored otherwise."""
+    n = np.asarray(fit.num_samples, float)
+    rmse = 1e-3 * np.asarray(fit.rmse_mm, float)
+    if not np.all(np.isfinite(rmse)) or np.sum(n) < 1:
+        return math.nan
+    total = float(np.sum(n))
+    ssr = max(float(np.sum(n * rmse**2)), 1e-300)
+    return total * math.log(ssr / total) + len(fit.names) * math.log(total)
+
+
+def _leading_pair(source):
+    """`(name_a, fit_a, name_b, fit_b, bic_now)` of a Diagnosis (its two candidates
+    of lowest ΔBIC that were fitted and did not diverge) or of a pair of FitResults
+    (BIC(b) - BIC(a) of the fits, NaN unless every test is force-driven)."""
+    from .._diagnose import Diagnosis
+
+    if isinstance(source, Diagnosis):
+        ranked = sorted(
+            (
+                c
+                for c in source.candidates
+                if c.applicable
+                and not c.diverging
+                and c.fit is not None
+                and math.isfinite(c.delta_bic)
+            ),
+            key=lambda c: c.delta_bic,
+        )
+        if len(ranked) < 2:
+            raise ValueError(
+                "`candidates`: the diagnosis has fewer than two fitted candidates "
+                f"({[c.id for c in ranked]}); there is nothing to separate."
+            )
+        a, b = ranked[:2]
+        return a.id, a.fit, b.id, b.fit, b.delta_bic - a.delta_bic
+    pair = tuple(source) if isinstance(source, (tuple, list)) else ()
+    if len(pair) != 2 or not all(isinstance(f, FitResult) for f in pair):
+        raise ValueError(
+            "`candidates` must be a jaxcable.Diagnosis or two jaxcable.FitResult, "
+            f"got {type(source).__name__}."
+        )
+    names = [type(f.model).__name__ for f in pair]
+    if names[0] == names[1]:
+        names = [f"{n} ({i + 1})" for i, n in enumerate(names)]
+    return names[0], pair[0], names[1], pair[1], _bic(pair[1]) - _bic(pair[0])
+
+
+def design_discriminating_test(
+    candidates,
+    *,
+    budget: TestBudget,
+    cable: Cable,
+    steps: int = 40,
+    learning_rate: float = 0.15,
+) -> DiscriminatingTest:
+    """Design the test that best separates two candidate models: after a diagnosis
+    that cannot tell its two leading candidates apart, the test to run next.
+
+    **The test** is the one of [`jaxcable.design_test`][]: `budget.blocks` blocks
+    of a ramp to a load level, a hold, a ramp down and a rest at one crosshead
+    speed, within the budget's duration, force and speed range.
+
+    **Criterion**: T-optimality (Atkinson & Fedorov 1975), made symmetric. If a is
+    true, the new test's elongations are a's; b, refitted to them and to the old
+    data together, keeps the lack of fit
+
+        T_ab = min_d |e_a - e_b - J_b d|^2 / sigma^2 + d^T P_b d,
+
+    J_b the Jacobian of b's elongations in its parameters theta (log of a log-scaled
+    one) through the simulation, P_b what the old data know of them (the inverse of
+    its fit's covariance, with the posterior's prior of ln 10 on theta), sigma the
+    elongation noise. The design maximises min(T_ab, T_ba) by Adam, the gradient
+    through the rate-driven simulation of a (whose sample times both share) and
+    both Jacobians. Expected BIC(wrong) - BIC(true) after the test is the BIC
+    difference so far plus T (see `DiscriminatingTest.expected_delta_bic`).
+
+    **Arguments:**
+
+    - `candidates`: a [`jaxcable.Diagnosis`][] (its two candidates of lowest
+        ΔBIC, fitted on its training data) or two [`jaxcable.FitResult`][] of the
+        same tests.
+    - `budget`: the lab's constraints, a [`jaxcable.TestBudget`][] (its `noise_mm`,
+        default the smaller RMS residual of the two fits).
+    - `cable`: the cable to test (length, diameter, breaking load; its speed is
+        designed, and is the speed of the standard protocol it is compared with).
+    - `steps`: optimiser steps.
+    - `learning_rate`: Adam's step on the unconstrained design variables.
+
+    **Returns:**
+
+    A [`jaxcable.DiscriminatingTest`][]: the protocol, its file, and the expected
+    separation with it and with Park's standard protocol.
+
+    **Raises:**
+
+    `ValueError` naming the argument: fewer than two fitted candidates, a wrong
+    type, parameters fitted per test.
+    """
+    if not isinstance(budget, TestBudget):
+        raise ValueError(
+            f"`budget` must be a jaxcable.TestBudget, got {type(budget).__name__}."
+        )
+    if not isinstance(cable, Cable):
+        raise ValueError(
+            f"`cable` must be a jaxcable.Cable, got {type(cable).__name__}."
+        )
+    if not isinstance(steps, int) or steps < 0:
+        raise ValueError(f"`steps` must be an int >= 0, got {steps!r}.")
+    name_a, fit_a, name_b, fit_b, bic_now = _leading_pair(candidates)
+    first = knowledge_of(fit_a, budget.noise_mm)
+    second = knowledge_of(fit_b, budget.noise_mm)
+    sigma = min(first.noise_m, second.noise_m)
+    layout = Layout.of(budget)
+    breaking = float(cable.breaking_load)
+
+    def build(d, ramp_time):
+        protocol, speed, levels, holds, rests = protocol_of(
+            d, layout, budget, breaking, ramp_time
+        )
+        return protocol, with_speed(cable, speed), levels, holds, rests
+
+    def loss(d, ramp_time):
+        protocol, c, *_ = build(d, ramp_time)
+        traj = simulate_rate_test(first.model, c, protocol, throw=False)
+        t_ab, t_ba = separations(first, second, c, traj.time, protocol.force, sigma)
+        # A smooth minimum (within about one unit of noise-sum of the smaller).
+        low = -jnp.logaddexp(-t_ab, -t_ba)
+        spent = traj.time[-1] - jnp.sum(protocol.duration)
+        return -jnp.log1p(jnp.maximum(low, 0.0)), spent
+
+    design, ramp_time = optimise(loss, Design.start(layout), steps, learning_rate)
+    protocol, c, levels, holds, rests = build(design, ramp_time)
+    traj = simulate_rate_test(first.model, c, protocol, throw=False)
+    duration = float(traj.time[-1])
+    found = separations(first, second, c, traj.time, protocol.force, sigma)
+    standard, usual = standard_protocol(first.model, cable, budget, duration)
+    std_traj = simulate_rate_test(first.model, usual, standard, throw=False)
+    baseline = separations(first, second, usual, std_traj.time, standard.force, sigma)
+    result = DiscriminatingTest(
+        protocol=protocol,
+        cable=c,
+        document={},
+        candidates=(name_a, name_b),
+        parameters=(len(fit_a.names), len(fit_b.names)),
+        bic_now=float(bic_now),
+        separation=tuple(float(t) for t in found),
+        separation_standard=tuple(float(t) for t in baseline),
+        samples=int(protocol.num_samples),
+        samples_before=int(np.sum(fit_a.num_samples)),
+        duration_s=duration,
+        noise_m=float(sigma),
+    )
+    document = protocol_document(
+        cable,
+        c.speed,
+        np.asarray(levels),
+        np.asarray(holds),
+        np.asarray(rests),
+        layout,
+        result.why(),
+    )
+    document["id"] = "discriminating-test"
+    return dataclasses.replace(result, document=document)
