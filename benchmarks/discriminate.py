@@ -1,7 +1,7 @@
 """The test that separates two candidates a diagnosis cannot tell apart: does the
 designed test name the true one (ΔBIC >= 10)?
 
-    python benchmarks/discriminate.py [--seeds 10] [--first-seed 0] [--size 1e11]
+    python benchmarks/discriminate.py [--seeds 10] [--first-seed 0] [--size 1.5e11]
         [--duration 3600] [--steps 30] [--max-gap 2] [--json-out FILE]
 
 Truth per seed: `jaxcable.papers.hidden_effect_model("second_retardation")` (Park's
@@ -101,7 +101,7 @@ def main():
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--seeds", type=int, default=10)
     p.add_argument("--first-seed", type=int, default=0)
-    p.add_argument("--size", type=float, default=1e11)
+    p.add_argument("--size", type=float, default=1.5e11)
     p.add_argument("--duration", type=float, default=3600.0)
     p.add_argument("--steps", type=int, default=30)
     p.add_argument("--max-gap", type=float, default=2.0)

@@ -148,3 +148,24 @@ def test_discriminating_test_separates(separating, tmp_path):
     out = tmp_path / "separate.csv"
     assert main(["simulate", str(path), "--out", str(out)]) == 0
     assert jc.read_test(out).num_samples == separating.protocol.num_samples
+
+
+@pytest.mark.parametrize(
+    "separate, extra, match",
+    [
+        ("sensor_drift", [], "two different extension ids"),
+        ("sensor_drift,sensor-drift", [], "two different extension ids"),
+        ("sensor_drift,no_such_cause", [], "two different extension ids"),
+        ("sensor_drift,bedding_in", ["--targets", "E1"], "--targets"),
+    ],
+)
+def test_design_command_separate_errors(
+    creep_csv, tmp_path, capsys, separate, extra, match
+):
+    args = [
+        "design", str(creep_csv), "--out", str(tmp_path / "NEXT.json"),
+        "--model", "burgers", "--duration-s", "600", "--separate", separate, *extra,
+    ]  # fmt: skip
+    assert main(args) != 0
+    assert match in capsys.readouterr().err
+    assert not (tmp_path / "NEXT.json").exists()

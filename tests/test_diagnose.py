@@ -34,6 +34,7 @@ def clean_tests():
         ({"holdout": 0.95}, "holdout"),
         ({"model": "integrated"}, "model"),
         ({"progress_meter": True}, "progress_meter"),
+        ({"fit_names": []}, "fit_names"),
     ],
 )
 def test_bad_arguments_name_the_argument(clean_tests, kwargs, match):

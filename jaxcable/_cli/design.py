@@ -140,7 +140,7 @@ def design_command(args) -> int:
             name,
             tests,
             meter=meter,
-            fit_names=fit_names,
+            fit_names=fit_names or None,
             candidates=separate,
             multistart=args.starts,
             max_steps=args.max_steps,

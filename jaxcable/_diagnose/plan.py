@@ -126,6 +126,11 @@ def choose_candidates(
     ids = [*EXTENSIONS, *COVARIATE_EXTENSIONS] if candidates is None else [*candidates]
     k = len(tests) if folds is None else folds
     _check_arguments(tests, model, ids, split, holdout, k)
+    if fit_names is not None and not [*fit_names]:
+        raise ValueError(
+            "`fit_names` is empty: name at least one base parameter to fit, or give "
+            "None for the model's identifiable ones."
+        )
     columns = tuple(covariate_columns(tests))
     if covariate is not None:
         # `Cable.covariate` is one column: the one the base already reads.

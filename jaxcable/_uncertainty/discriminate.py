@@ -115,11 +115,16 @@ class DiscriminatingTest:
             else "not enough for very strong evidence (10): a longer test, a larger "
             "force or a second test is needed"
         )
+        if math.isnan(self.bic_now) or abs(self.bic_now) <= 10:
+            so_far = "explain the data so far about equally"
+        else:
+            ahead = a if self.bic_now > 0 else b
+            so_far = f"are not equal on the data so far ({ahead} is ahead)"
         return (
-            f"The two candidates {a} and {b} explain the data so far about equally "
-            f"(BIC({b}) - BIC({a}) = {now}). The test maximises the smaller of the "
-            "two lack-of-fit sums (T-optimal: the wrong candidate refitted to what "
-            "the true one predicts, old data included, linearised), so that it "
+            f"The two candidates {a} and {b} {so_far} (BIC({b}) - BIC({a}) = "
+            f"{now}). The test maximises the smaller of the two lack-of-fit sums "
+            "(T-optimal: the wrong candidate refitted to what the true one "
+            "predicts, old data included, linearised), so that it "
             "separates them whichever is true: the expected BIC difference in "
             f"favour of the true one is at least {designed:.1f} ({verdict}); Park's "
             f"10-cycle protocol of the same duration: {standard:.1f}."
