@@ -106,6 +106,11 @@ def main():
     p.add_argument("--steps", type=int, default=30)
     p.add_argument("--max-gap", type=float, default=2.0)
     p.add_argument("--max-tries", type=int, default=40)
+    p.add_argument(
+        "--seed-list",
+        default=None,
+        help="comma-separated seeds to try instead of --first-seed onwards",
+    )
     p.add_argument("--json-out", default=None)
     args = p.parse_args()
     cable = _cable(LENGTHS_MM[-1])
@@ -118,8 +123,13 @@ def main():
     )
     rows, skipped = [], []
     began = time.perf_counter()
-    seed = args.first_seed
-    while len(rows) < args.seeds and seed < args.first_seed + args.max_tries:
+    if args.seed_list:
+        order = [int(x) for x in args.seed_list.split(",")]
+    else:
+        order = list(range(args.first_seed, args.first_seed + args.max_tries))
+    for seed in order:
+        if len(rows) >= args.seeds:
+            break
         t0 = time.perf_counter()
         truth = hidden_effect_model(TRUE, seed=seed, size=args.size)
         tests = _standard_data(truth, seed)
@@ -140,7 +150,6 @@ def main():
         if not (math.isfinite(gap) and abs(gap) <= args.max_gap):
             skipped.append({"seed": seed, "gap": gap, "gap_diagnosis": gap_diagnosis})
             print(f"seed {seed}: gap {gap:+.1f}, not ambiguous: skipped", flush=True)
-            seed += 1
             continue
         designed = jc.design_test(
             diagnosis, budget=budget, cable=cable, steps=args.steps
@@ -176,7 +185,6 @@ def main():
             f"({row['seconds']:.0f} s)",
             flush=True,
         )
-        seed += 1
     separated = sum(r["delta_bic_designed"] >= 10 for r in rows)
     separated_std = sum(r["delta_bic_standard"] >= 10 for r in rows)
     out = {

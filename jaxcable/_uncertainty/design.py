@@ -156,14 +156,17 @@ class Design(eqx.Module):
     speed: jax.Array
 
     @classmethod
-    def start(cls, layout: Layout) -> "Design":
-        """The first design: levels near the largest force (the information grows
-        with the load), equal holds and rests, the middle of the speed range."""
+    def start(cls, layout: Layout, variant: int = 0) -> "Design":
+        """A first design: levels near the largest force (the information grows
+        with the load); variant 0: equal holds and rests at the middle of the speed
+        range; 1: slow, long rests; 2: fast, long holds (other starts for a
+        criterion with several optima)."""
         k = layout.blocks
+        tilt = {0: 0.0, 1: -1.0, 2: 1.0}[variant]
         return cls(
             levels=jnp.linspace(2.0, 1.0, k) if k > 1 else jnp.full(1, 2.0),
-            shares=jnp.zeros(2 * k),
-            speed=jnp.zeros(()),
+            shares=jnp.concatenate([jnp.full(k, tilt), jnp.full(k, -tilt)]),
+            speed=jnp.asarray(-2.0 * tilt),
         )
 
 
@@ -172,10 +175,12 @@ def with_speed(cable: Cable, speed) -> Cable:
     return eqx.tree_at(lambda c: c.speed, cable, jnp.asarray(speed, cable.speed.dtype))
 
 
-def optimise(loss, design: Design, steps: int, learning_rate: float):
+def optimise(grad, design: Design, steps: int, learning_rate: float):
     """Adam on `design` for `loss(design, ramp_time) -> (value, spent)`, `spent` the
     ramps' duration the simulation found (s), which the next step's protocol
-    assumes; the best design seen and its ramp time.
+    assumes; `grad` is `jax.jit(jax.value_and_grad(loss, has_aux=True))` (made once
+    by the caller, so that several starts share its compilation). The best design
+    seen, its ramp time and its loss.
 
     **Raises:**
 
@@ -183,7 +188,6 @@ def optimise(loss, design: Design, steps: int, learning_rate: float):
     """
     import optax
 
-    grad = jax.jit(jax.value_and_grad(loss, has_aux=True))
     optimiser = optax.apply_if_finite(optax.adam(learning_rate), 5)
     state = optimiser.init(design)
     (value, ramp_time), _ = grad(design, 0.0)
@@ -201,7 +205,7 @@ def optimise(loss, design: Design, steps: int, learning_rate: float):
             ramp_time = float(spent)
         updates, state = optimiser.update(g, state, design)
         design = optax.apply_updates(design, updates)
-    return best[1], best[2]
+    return best[1], best[2], best[0]
 
 
 def standard_protocol(model, cable: Cable, budget: TestBudget, duration: float):

@@ -6,6 +6,7 @@ import dataclasses
 import json
 import os
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -221,7 +222,8 @@ def design_test(
         spent = traj.time[-1] - jnp.sum(protocol.duration)
         return value, spent
 
-    design, ramp_time = optimise(loss, design, steps, learning_rate)
+    grad = jax.jit(jax.value_and_grad(loss, has_aux=True))
+    design, ramp_time, _ = optimise(grad, design, steps, learning_rate)
     protocol, c, levels, holds, rests = build(design, ramp_time)
     precision, traj = _precision_after(knowledge, c, protocol)
     before = np.linalg.inv(knowledge.precision())

@@ -171,15 +171,17 @@ def separations(first: Knowledge, second: Knowledge, cable: Cable, time, force, 
 
 
 def _bic(fit: FitResult) -> float:
-    """BIC = n ln(SSR / n) + k ln n of a fit of force-driven tests (SSR in m^2 over
-    its n samples); NaN when a test is scored otherwise."""
+    """The diagnosis's BIC (n ln(SSR / n) + k ln n, residuals in m) of a fit of
+    force-driven tests over all its samples; NaN when a test is scored otherwise."""
+    from .._diagnose.scoring import bic
+
     n = np.asarray(fit.num_samples, float)
-    rmse = 1e-3 * np.asarray(fit.rmse_mm, float)
-    if not np.all(np.isfinite(rmse)) or np.sum(n) < 1:
+    rmse_mm = np.asarray(fit.rmse_mm, float)
+    if not np.all(np.isfinite(rmse_mm)) or np.sum(n) < 1:
         return math.nan
-    total = float(np.sum(n))
-    ssr = max(float(np.sum(n * rmse**2)), 1e-300)
-    return total * math.log(ssr / total) + len(fit.names) * math.log(total)
+    total = int(np.sum(n))
+    pooled = math.sqrt(float(np.sum(n * rmse_mm**2)) / total)
+    return bic(pooled, total, len(fit.names), 1e3)
 
 
 def _leading_pair(source):
@@ -245,7 +247,7 @@ def design_discriminating_test(
     its fit's covariance, with the posterior's prior of ln 10 on theta), sigma the
     elongation noise. The design maximises min(T_ab, T_ba) by Adam, the gradient
     through the rate-driven simulation of a (whose sample times both share) and
-    both Jacobians. Expected BIC(wrong) - BIC(true) after the test is the BIC
+    both Jacobians, from three starting designs (the best kept). Expected BIC(wrong) - BIC(true) after the test is the BIC
     difference so far plus T (see `DiscriminatingTest.expected_delta_bic`).
 
     **Arguments:**
@@ -302,7 +304,17 @@ def design_discriminating_test(
         spent = traj.time[-1] - jnp.sum(protocol.duration)
         return -jnp.log1p(jnp.maximum(low, 0.0)), spent
 
-    design, ramp_time = optimise(loss, Design.start(layout), steps, learning_rate)
+    # min(T_ab, T_ba) has a kink wherever the two cross, and a design can stall
+    # where one of them is flat: three starts, the best kept.
+    grad = jax.jit(jax.value_and_grad(loss, has_aux=True))
+    best = None
+    for variant in range(3):
+        design, ramp_time, value = optimise(
+            grad, Design.start(layout, variant), steps, learning_rate
+        )
+        if best is None or value < best[0]:
+            best = (value, design, ramp_time)
+    _, design, ramp_time = best
     protocol, c, levels, holds, rests = build(design, ramp_time)
     traj = simulate_rate_test(first.model, c, protocol, throw=False)
     duration = float(traj.time[-1])
