@@ -6,6 +6,7 @@ from .plan import Plan as Plan, covariate_columns as covariate_columns
 from .result import Candidate as Candidate, Diagnosis as Diagnosis
 from .scoring import (
     Scoring as Scoring,
+    bic as bic,
     heldout_rmse as heldout_rmse,
     model_elongations as model_elongations,
     model_outputs as model_outputs,

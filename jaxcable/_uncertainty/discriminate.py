@@ -177,7 +177,7 @@ def separations(first: Knowledge, second: Knowledge, cable: Cable, time, force, 
 def _bic(fit: FitResult) -> float:
     """The diagnosis's BIC (n ln(SSR / n) + k ln n, residuals in m) of a fit of
     force-driven tests over all its samples; NaN when a test is scored otherwise."""
-    from .._diagnose.scoring import bic
+    from .._diagnose import bic
 
     n = np.asarray(fit.num_samples, float)
     rmse_mm = np.asarray(fit.rmse_mm, float)
