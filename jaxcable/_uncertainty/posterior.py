@@ -199,7 +199,7 @@ def sample_posterior(
     **Sampler.** BlackJAX's NUTS kernel (multinomial, iterative), the chains vmapped
     in one compiled program (laid out over the devices when there are several: see
     `jaxcable.monte_carlo`); the gradient of the log density is taken through the
-    simulation in forward mode. The chains start at the posterior's mode (BFGS on
+    simulation in forward mode. The chains start at the posterior's mode (Newton on
     the log density from the least-squares fit, whose Laplace covariance in u, the
     prior's curvature added, whitens it) and at draws of the Laplace approximation
     there (the inverse Hessian at the mode), which is also the first dense metric; the warm-up adapts the step size by dual
