@@ -169,3 +169,31 @@ def test_design_command_separate_errors(
     assert main(args) != 0
     assert match in capsys.readouterr().err
     assert not (tmp_path / "NEXT.json").exists()
+
+
+def test_a_diagnosis_gives_its_two_leading_candidates(burgers_fit):
+    from jaxcable._uncertainty.discriminate import _leading_pair
+
+    def candidate(id, delta_bic, fit=burgers_fit, **kw):
+        nan = float("nan")
+        return jc.Candidate(
+            id, nan, nan, nan, delta_bic, nan, nan, "", "", False, fit=fit, **kw
+        )
+
+    diagnosis = object.__new__(jc.Diagnosis)
+    object.__setattr__(
+        diagnosis,
+        "candidates",
+        [
+            candidate("a", -5.0),
+            candidate("b", -40.0, diverging="departs"),
+            candidate("c", -20.0),
+            candidate("d", -30.0, fit=None),
+            candidate("e", -12.0),
+        ],
+    )
+    name_a, _, name_b, _, now = _leading_pair(diagnosis)
+    assert (name_a, name_b, now) == ("c", "e", 8.0)
+    object.__setattr__(diagnosis, "candidates", [candidate("a", -5.0)])
+    with pytest.raises(ValueError, match="fewer than two"):
+        jc.design_test(diagnosis, budget=BUDGET, cable=CABLE)
