@@ -2,6 +2,7 @@
 shrink what a fit or a posterior knows least."""
 
 import dataclasses
+import json
 import math
 from collections.abc import Sequence
 
@@ -12,6 +13,7 @@ import numpy as np
 
 from .._cable import Cable
 from .._drive import Protocol, simulate_force_history, simulate_rate_test
+from .._files import write_text_atomic
 from .._fit import FitResult, field_at
 from .._models import AbstractCableModel, parameter_info
 from .budget import TestBudget
@@ -229,6 +231,14 @@ def standard_protocol(model, cable: Cable, budget: TestBudget, duration: float):
     return standard, usual
 
 
+def protocol_json(document: dict, path) -> str:
+    """A protocol file's JSON text, written to `path` when it is not None."""
+    text = json.dumps(document, indent=2)
+    if path is not None:
+        write_text_atomic(path, text + "\n")
+    return text
+
+
 def protocol_document(cable, speed, levels, holds, rests, layout, why: str) -> dict:
     """The protocol file of a design (`jaxcable simulate` runs it): its blocks'
     levels (N), holds and rests (s), at the crosshead `speed` (m/s)."""
@@ -250,12 +260,27 @@ def protocol_document(cable, speed, levels, holds, rests, layout, why: str) -> d
     }
 
 
+def check_design_arguments(budget: TestBudget, cable: Cable, steps: int) -> None:
+    """Raise `ValueError` naming the first bad argument of a design function."""
+    if not isinstance(budget, TestBudget):
+        raise ValueError(
+            f"`budget` must be a jaxcable.TestBudget, got {type(budget).__name__}."
+        )
+    if not isinstance(cable, Cable):
+        raise ValueError(
+            f"`cable` must be a jaxcable.Cable, got {type(cable).__name__}."
+        )
+    if not isinstance(steps, int) or steps < 0:
+        raise ValueError(f"`steps` must be an int >= 0, got {steps!r}.")
+
+
 def protocol_of(
-    design: Design, layout: Layout, budget: TestBudget, breaking: float, ramp_time
+    design: Design, layout: Layout, budget: TestBudget, cable: Cable, ramp_time
 ):
-    """The `(Protocol, speed m/s, levels N, holds s, rests s)` of a design; `ramp_time`
-    (s, an estimate) is the time the ramps take, the holds and rests share the rest
-    of the budget."""
+    """The `(Protocol, cable at the designed speed, levels N, holds s, rests s)` of a
+    design; `ramp_time` (s, an estimate) is the time the ramps take, the holds and
+    rests share the rest of the budget."""
+    breaking = float(cable.breaking_load)
     levels = _unit(design.levels, 0.05, 1.0) * budget.max_force_fraction * breaking
     share = jax.nn.softmax(design.shares)
     free = jnp.maximum(budget.duration_s - ramp_time, 0.05 * budget.duration_s)
@@ -278,7 +303,7 @@ def protocol_of(
         duration=jnp.concatenate(durs),
         mask=np.ones(force.shape, bool),
     )
-    return protocol, speed, levels, holds, rests
+    return protocol, with_speed(cable, speed), levels, holds, rests
 
 
 def information(knowledge: Knowledge, cable: Cable, time, force):

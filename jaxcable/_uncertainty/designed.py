@@ -3,7 +3,6 @@ and what it is expected to teach beside Park's standard protocol of the same
 duration."""
 
 import dataclasses
-import json
 import os
 
 import jax
@@ -12,21 +11,21 @@ import numpy as np
 
 from .._cable import Cable
 from .._drive import Protocol, simulate_rate_test
-from .._files import write_text_atomic
 from .budget import TestBudget
 from .design import (
     Design,
     Knowledge,
     Layout,
+    check_design_arguments,
     default_targets,
     information,
     knowledge_of,
     log_det_subset,
     optimise,
     protocol_document,
+    protocol_json,
     protocol_of,
     standard_protocol,
-    with_speed,
 )
 from .discriminate import DiscriminatingTest, design_discriminating_test
 
@@ -109,10 +108,7 @@ class DesignedTest:
 
     def to_json(self, path: str | os.PathLike | None = None) -> str:
         """The protocol file (JSON text), written to `path` when given."""
-        text = json.dumps(self.document, indent=2)
-        if path is not None:
-            write_text_atomic(path, text + "\n")
-        return text
+        return protocol_json(self.document, path)
 
 
 def _precision_after(knowledge: Knowledge, cable: Cable, protocol: Protocol):
@@ -193,27 +189,14 @@ def design_test(
             steps=steps,
             learning_rate=learning_rate,
         )
-    if not isinstance(budget, TestBudget):
-        raise ValueError(
-            f"`budget` must be a jaxcable.TestBudget, got {type(budget).__name__}."
-        )
-    if not isinstance(cable, Cable):
-        raise ValueError(
-            f"`cable` must be a jaxcable.Cable, got {type(cable).__name__}."
-        )
-    if not isinstance(steps, int) or steps < 0:
-        raise ValueError(f"`steps` must be an int >= 0, got {steps!r}.")
+    check_design_arguments(budget, cable, steps)
     knowledge = knowledge_of(fit_or_posterior, budget.noise_mm)
     idx = default_targets(knowledge, targets)
     layout = Layout.of(budget)
-    breaking = float(cable.breaking_load)
     design = Design.start(layout)
 
     def build(d, ramp_time):
-        protocol, speed, levels, holds, rests = protocol_of(
-            d, layout, budget, breaking, ramp_time
-        )
-        return protocol, with_speed(cable, speed), levels, holds, rests
+        return protocol_of(d, layout, budget, cable, ramp_time)
 
     def loss(d, ramp_time):
         protocol, c, *_ = build(d, ramp_time)

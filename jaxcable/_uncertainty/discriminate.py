@@ -2,7 +2,6 @@
 candidate models, `jaxcable.design_discriminating_test`."""
 
 import dataclasses
-import json
 import math
 import os
 
@@ -12,19 +11,19 @@ import numpy as np
 
 from .._cable import Cable
 from .._drive import Protocol, simulate_force_history, simulate_rate_test
-from .._files import write_text_atomic
 from .._fit import FitResult
 from .budget import TestBudget
 from .design import (
     Design,
     Knowledge,
     Layout,
+    check_design_arguments,
     knowledge_of,
     optimise,
     protocol_document,
+    protocol_json,
     protocol_of,
     standard_protocol,
-    with_speed,
 )
 
 
@@ -136,10 +135,7 @@ class DiscriminatingTest:
 
     def to_json(self, path: str | os.PathLike | None = None) -> str:
         """The protocol file (JSON text), written to `path` when given."""
-        text = json.dumps(self.document, indent=2)
-        if path is not None:
-            write_text_atomic(path, text + "\n")
-        return text
+        return protocol_json(self.document, path)
 
 
 def _response(knowledge: Knowledge, cable: Cable, time, force):
@@ -276,28 +272,15 @@ def design_discriminating_test(
     `ValueError` naming the argument: fewer than two fitted candidates, a wrong
     type, parameters fitted per test.
     """
-    if not isinstance(budget, TestBudget):
-        raise ValueError(
-            f"`budget` must be a jaxcable.TestBudget, got {type(budget).__name__}."
-        )
-    if not isinstance(cable, Cable):
-        raise ValueError(
-            f"`cable` must be a jaxcable.Cable, got {type(cable).__name__}."
-        )
-    if not isinstance(steps, int) or steps < 0:
-        raise ValueError(f"`steps` must be an int >= 0, got {steps!r}.")
+    check_design_arguments(budget, cable, steps)
     name_a, fit_a, name_b, fit_b, bic_now = _leading_pair(candidates)
     first = knowledge_of(fit_a, budget.noise_mm)
     second = knowledge_of(fit_b, budget.noise_mm)
     sigma = min(first.noise_m, second.noise_m)
     layout = Layout.of(budget)
-    breaking = float(cable.breaking_load)
 
     def build(d, ramp_time):
-        protocol, speed, levels, holds, rests = protocol_of(
-            d, layout, budget, breaking, ramp_time
-        )
-        return protocol, with_speed(cable, speed), levels, holds, rests
+        return protocol_of(d, layout, budget, cable, ramp_time)
 
     def loss(d, ramp_time):
         protocol, c, *_ = build(d, ramp_time)
