@@ -18,7 +18,6 @@ linearised standard error; the sampler's time, compilation included. Target: R-h
 """
 
 import argparse
-import dataclasses
 import importlib.resources
 import json
 import os
@@ -41,6 +40,9 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
 import jaxcable as jc  # noqa: E402
+
+# The command line's `--every`, so that the thinned files are the ones it fits.
+from jaxcable._cli.data import _thin as thin  # noqa: E402
 from jaxcable._models import PARK_IDENTIFIABLE  # noqa: E402
 
 
@@ -48,19 +50,6 @@ from jaxcable._models import PARK_IDENTIFIABLE  # noqa: E402
 # and the bundled tests' rests of 24-72 h identify (relative standard errors of
 # the least-squares fit 0.4 % and 10 %).
 EXTRA = ("lambda1", "lambda2")
-
-
-def _thinned(test: jc.TestData, every: int) -> jc.TestData:
-    if every == 1:
-        return test
-    keep = np.arange(0, test.num_samples, every)
-    columns = {
-        f.name: getattr(test, f.name)[keep]
-        for f in dataclasses.fields(test)
-        if np.shape(getattr(test, f.name)) == (test.num_samples,)
-    }
-    extra = {k: v[keep] for k, v in (test.extra or {}).items()}
-    return dataclasses.replace(test, **columns, extra=extra)
 
 
 def main():
@@ -88,7 +77,7 @@ def main():
         jc.enable_cpu_loop_kernels()
     folder = importlib.resources.files("jaxcable").joinpath("data")
     files = sorted(f for f in folder.iterdir() if f.name.endswith(".csv"))
-    tests = [_thinned(jc.read_test(f), args.every) for f in files]
+    tests = [thin(jc.read_test(f), args.every) for f in files]
     model = jc.IntegratedModel()
     names = args.fit.split(",")
     t0 = time.perf_counter()
