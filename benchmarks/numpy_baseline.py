@@ -49,7 +49,7 @@ _POSITIVE = (
     "E3r",
     "lambda1",
     "t_e",
-    "sigma_a",
+    "strain_a",
 )
 # As jaxcable._drive.drives: residual = strain error / (|strain at the start of the
 # step| + |crosshead strain at the guessed end| + floor).
@@ -130,6 +130,7 @@ def simulate_rate_test_numpy(
     *,
     diameter: float = 3e-3,
     breaking_load: float = 2000.0,
+    breaking_strain: float = 0.07,
     tol: float = 1e-12,
     max_steps: int = 32,
 ):
@@ -145,8 +146,10 @@ def simulate_rate_test_numpy(
         (s, holds) and optionally `mask`, each of shape (samples,) - the fields of a
         `jaxcable.Protocol` - or the tuple (force, direction, duration[, mask]).
     - `diameter`: cable diameter, m.
-    - `breaking_load`: the cable's breaking load, N (the parameters are in their
-        domain only where E1c A exceeds it, as `jaxcable.IntegratedModel.check`).
+    - `breaking_load`, `breaking_strain`: the cable's breaking load, N, and
+        strain: with hardening (beta > 0) the parameters are in their domain only
+        where E1c A exceeds the load or the strain is at most 1, as
+        `jaxcable.IntegratedModel.check`.
     - `tol`, `max_steps`: Newton tolerance on the relative strain residual, and the
         most Newton steps per sample.
 
@@ -187,7 +190,9 @@ def simulate_rate_test_numpy(
     for k in _POSITIVE:
         ok &= np.isfinite(p[k]) & (p[k] > 0)
     ok &= (p["beta"] >= 0) & (p["gamma"] >= 0)
-    ok &= p["E1c"] * area > breaking_load
+    ok &= (
+        (p["beta"] == 0) | (breaking_strain <= 1.0) | (p["E1c"] * area > breaking_load)
+    )
 
     # Compliances 1 / (E A) of the instantaneous strain and of the three elements.
     compliance_c = 1.0 / (p["E1c"] * area)
@@ -221,8 +226,9 @@ def simulate_rate_test_numpy(
         static = _safe_pow(F * compliance_c, h)
         static_max = _safe_pow(f_max * compliance_c, h)
         inst = np.maximum(static_max - (f_max - F) * compliance_r, static)
-        rate0 = _eyring_rate(force_prev / area, p["eta0"], p["sigma_a"])
-        rate1 = _eyring_rate(F / area, p["eta0"], p["sigma_a"])
+        sigma_a = p["strain_a"] * p["E1c"]
+        rate0 = _eyring_rate(force_prev / area, p["eta0"], sigma_a)
+        rate1 = _eyring_rate(F / area, p["eta0"], sigma_a)
         flow_rate = 0.5 * (rate0 + rate1)
 
         def strain_and_slope(dt):

@@ -66,7 +66,7 @@ PARAMETERS = (
     "lambda1",
     "lambda2",
     "t_e",
-    "sigma_a",
+    "strain_a",
 )
 # The model's declared parameters must be the Numba loop's, in its positional order.
 assert PARAMETERS == tuple(field_facts(jc.IntegratedModel)), "IntegratedModel changed"
@@ -269,7 +269,8 @@ def _build(dtype):
         out_time[:] = np.nan
         out_elong[:] = np.nan
         E1c, beta, gamma, E1r, E2c, t_c, eta0 = p[:7]
-        E2r, t_r1, E3r, lambda1, lambda2, t_e, sigma_a = p[7:]
+        E2r, t_r1, E3r, lambda1, lambda2, t_e, strain_a = p[7:]
+        sigma_a = strain_a * E1c
         length, speed, diameter, breaking_load, breaking_strain = fields
         area = PI4 * (diameter * diameter)
         rate = speed / length
@@ -277,7 +278,10 @@ def _build(dtype):
         ok = math.isfinite(t_r2) and t_r2 > ZERO and beta >= ZERO and gamma >= ZERO
         for k in _POSITIVE:
             ok = ok and math.isfinite(p[k]) and p[k] > ZERO
-        if not (ok and E1c * area > breaking_load):
+        hardening_ok = (
+            beta == ZERO or breaking_strain <= ONE or E1c * area > breaking_load
+        )
+        if not (ok and hardening_ok):
             return 1
         times = (t_c, t_e, t_r1, t_r2)
         cc = ONE / (E1c * area)

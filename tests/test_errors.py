@@ -151,7 +151,7 @@ def test_solve_beyond_twice_the_length_is_flagged():
     # 300 mm) the crosshead outruns that creep, so 1500 N is reached; at 3 mm/min
     # (1.7e-4 / s) the creep outruns the crosshead from about 1330 N on: out of
     # reach, not a strain beyond 1.
-    model = jc.IntegratedModel(sigma_a=1.5e7)
+    model = jc.IntegratedModel(strain_a=1.5e7 / 2.591e9)
     protocol = jc.Protocol.concatenate(
         jc.Protocol.cycles(1500.0, 1, 10), jc.Protocol.hold(1500.0, 3600.0, 6)
     )

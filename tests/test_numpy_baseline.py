@@ -29,7 +29,7 @@ SPEEDS = np.array([3e-3, 5e-3, 10e-3]) / 60
 PINNED = jc.IntegratedModel(
     E1c=2.2e9, beta=0.3, gamma=0.5, E1r=2.5e9, E2c=3.7e9, t_c=100.0, eta0=1e15,
     E2r=2.5e9, t_r1=60.0, E3r=2.0e9, lambda1=7.8e-3, lambda2=2.1e4, t_e=5.0,
-    sigma_a=4e7,
+    strain_a=4e7 / 2.2e9,
 )  # fmt: skip
 
 

@@ -119,7 +119,7 @@ def test_hold_near_the_breaking_load_is_flagged():
         jc.simulate_force_history(jc.IntegratedModel(), jc.Cable(length=0.3), time, f)
 
 
-_SCALED = ("E1c", "E2c", "t_c", "E2r", "t_r1", "E3r", "t_e", "eta0", "sigma_a")
+_SCALED = ("E1c", "E2c", "t_c", "E2r", "t_r1", "E3r", "t_e", "eta0", "strain_a")
 
 
 @SETTINGS

@@ -33,9 +33,10 @@ _TRANSFORM_DOMAIN = {
 }
 
 
-# The facts of a modulus and of a viscosity (both follow a stiffness scaling).
+# The facts of a modulus and of a viscosity (both follow a stiffness scaling; a
+# viscosity, a modulus times a time, also follows a time scaling).
 MODULUS: dict[str, Any] = {"unit": "Pa", "stiffness": 1.0}
-VISCOSITY: dict[str, Any] = {"unit": "Pa s", "stiffness": 1.0}
+VISCOSITY: dict[str, Any] = {"unit": "Pa s", "stiffness": 1.0, "time": 1.0}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -76,6 +77,8 @@ class FieldFacts:
     - `null`: the value at which an extension is its base exactly, or None.
     - `start`: an extension's start value for a fit (its `wrap`), or None.
     - `note`: why the domain is what it is, for an error (default: the unit).
+    - `time`: the power with which it follows a time scaling of the start
+        (`jaxcable.scaled_start`): retardation times and viscosities 1, the rest 0.
     """
 
     unit: str
@@ -86,6 +89,7 @@ class FieldFacts:
     null: float | None
     start: float | None
     note: str
+    time: float = 0.0
 
 
 def parameter(
@@ -99,6 +103,7 @@ def parameter(
     null: float | None = None,
     start: float | None = None,
     note: str = "",
+    time: float = 0.0,
 ) -> Any:
     """A model's array field with its facts declared (an `eqx.field` converted by
     `jaxcable._arrays.field_array`).
@@ -119,6 +124,8 @@ def parameter(
         nonzero for an effect, so that a log transform works and the gradient is
         informative).
     - `note`: why the domain is what it is, for the error (default: the unit).
+    - `time`: the power with which it follows a time scaling of the start (a
+        retardation time 1; [`jaxcable.scaled_start`][]).
 
     **Returns:**
 
@@ -128,7 +135,9 @@ def parameter(
         domain = _TRANSFORM_DOMAIN.get(transform, "any")
     if domain not in _checks.DOMAINS:
         raise ValueError(f"unknown domain {domain!r}")
-    facts = FieldFacts(unit, domain, transform, stiffness, fitted, null, start, note)
+    facts = FieldFacts(
+        unit, domain, transform, stiffness, fitted, null, start, note, time
+    )
     return eqx.field(default=default, converter=field_array, metadata={_KEY: facts})
 
 

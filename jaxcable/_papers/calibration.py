@@ -51,6 +51,13 @@ from .park import (
 # and the resulting creep rates beside the published ones.
 SK78_FLOW: dict[str, float] = dict(eta0=1.2e16, sigma_a=4e7)
 
+
+def _flow(e1c) -> dict:
+    """`SK78_FLOW` as the model's fields for a loading modulus `e1c`, Pa: its
+    activation stress as an activation strain (`IntegratedModel.strain_a`)."""
+    return dict(eta0=SK78_FLOW["eta0"], strain_a=SK78_FLOW["sigma_a"] / e1c)
+
+
 # Fixed hardening (Park Eq. 2): not identified by Park's tests.
 SK78_HARDENING: dict[str, float] = dict(beta=0.0, gamma=2.0)
 
@@ -66,7 +73,7 @@ SK78_START: dict[str, float] = dict(
     lambda1=3.371e-3,
     lambda2=-156.7,
     t_e=3.989,
-    **SK78_FLOW,
+    **_flow(2.605e9),
     **SK78_HARDENING,
 )
 
@@ -132,7 +139,7 @@ def _model_from_log(logp) -> IntegratedModel:
         t_e=p["t_e"],
         lambda1=lambda1,
         lambda2=lambda2,
-        **SK78_FLOW,
+        **_flow(p["E1c"]),
         **SK78_HARDENING,
     )
 
