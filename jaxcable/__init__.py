@@ -74,6 +74,7 @@ from ._models import (
     CovariateShift as CovariateShift,
     CovariateStrain as CovariateStrain,
     DiscoveredTerm as DiscoveredTerm,
+    FindleyModel as FindleyModel,
     FiveElementModel as FiveElementModel,
     Hereditary as Hereditary,
     HookeModel as HookeModel,

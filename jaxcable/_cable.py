@@ -47,6 +47,27 @@ DEFAULT_RATE_MM_PER_MIN = 3.0
 # docs/model_notes.md ("Breaking strain") gives the sources.
 DEFAULT_BREAKING_STRAIN = 0.07
 
+# The rated breaking load of Park's 3 mm SK78 cable (Park, Section 2.1), N: the
+# `Cable` default, and the scale of `default_breaking_load` for other diameters.
+DEFAULT_BREAKING_LOAD_N = 2000.0
+
+
+def default_breaking_load(diameter_mm):
+    """The breaking load of a cable that does not give its own, N: the 3 mm rope's
+    `DEFAULT_BREAKING_LOAD_N` scaled with the cross-section, `2000 N x (d / 3 mm)^2`
+    (a rope's nominal strength, 283 MPa, held at any diameter), so that a thin
+    fibre does not inherit the 3 mm rope's load nor a thick rope a 3 mm limit.
+
+    **Arguments:**
+
+    - `diameter_mm`: the nominal diameter, mm.
+
+    **Returns:**
+
+    The breaking load, N.
+    """
+    return DEFAULT_BREAKING_LOAD_N * (diameter_mm / DEFAULT_DIAMETER_MM) ** 2
+
 
 def speed_from_mm_per_min(rate_mm_per_min):
     """The crosshead speed in m/s of a rate in mm/min (the unit of data files)."""
@@ -69,7 +90,9 @@ class Cable(eqx.Module):
         (default 3 mm/min). The strain rate v / L0 sets the loading time of a
         rate-driven test (Park Eq. 6) and the long-term retardation time (Park Eq. 8).
     - `breaking_load`: force above which inputs are rejected, N (default 2000 N, the
-        rated load of the 3 mm SK78 cable in Park Section 2.1).
+        rated load of the 3 mm SK78 cable in Park Section 2.1; a cable built by
+        [`jaxcable.Cable.from_mm`][] without one gets it scaled with its
+        cross-section, [`jaxcable.default_breaking_load`][]).
     - `breaking_strain`: strain (elongation / L0) at which the cable breaks,
         dimensionless (default `jaxcable.DEFAULT_BREAKING_STRAIN`, for the 3 mm
         braided Dyneema SK78 rope). Every simulation reports a strain above it as
@@ -95,7 +118,7 @@ class Cable(eqx.Module):
         converter=field_array, default=speed_from_mm_per_min(DEFAULT_RATE_MM_PER_MIN)
     )
     breaking_load: Float[Array, "*batch"] = eqx.field(
-        converter=field_array, default=2000.0
+        converter=field_array, default=DEFAULT_BREAKING_LOAD_N
     )
     breaking_strain: Float[Array, "*batch"] = eqx.field(
         converter=field_array, default=DEFAULT_BREAKING_STRAIN
@@ -143,7 +166,9 @@ class Cable(eqx.Module):
         - `diameter_mm`: nominal diameter, mm (default 3 mm).
         - `rate_mm_per_min`: crosshead speed, mm/min (default 3 mm/min).
         - `temperature_C`: temperature, °C, or `None` for the `Cable` default (20 °C).
-        - `breaking_load_N`: breaking load, N, or `None` for the `Cable` default.
+        - `breaking_load_N`: breaking load, N, or `None` for the 3 mm rope's 2000 N
+            scaled with the cross-section ([`jaxcable.default_breaking_load`][]): a
+            thin fibre does not inherit the 3 mm rope's load.
         - `breaking_strain`: breaking strain (elongation / L0, dimensionless), or
             `None` for the `Cable` default.
 
@@ -155,8 +180,9 @@ class Cable(eqx.Module):
         kwargs = {}
         if temperature_C is not None:
             kwargs["temperature"] = temperature_C + ZERO_CELSIUS
-        if breaking_load_N is not None:
-            kwargs["breaking_load"] = breaking_load_N
+        if breaking_load_N is None:
+            breaking_load_N = default_breaking_load(diameter_mm)
+        kwargs["breaking_load"] = breaking_load_N
         if breaking_strain is not None:
             kwargs["breaking_strain"] = breaking_strain
         return cls(

@@ -103,6 +103,7 @@ def test_every_class_is_registered():
         "hooke",
         "burgers",
         "bouc-wen",
+        "findley",
     ]
     assert DEFAULT_CLI_MODEL == "integrated"
 

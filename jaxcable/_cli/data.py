@@ -1,5 +1,6 @@
-"""The measured tests of `jaxcable fit`, `jaxcable diagnose` and `jaxcable demo`: read
-with the data options, thinned, and described in one line per file."""
+"""The measured tests of every command (`fit`, `diagnose`, `design`, `simulate
+HISTORY.csv`, `demo`): read by one path with the data options, their force cleaned
+of a load cell's noise about zero, thinned, and described in one line per file."""
 
 import csv
 import dataclasses
@@ -10,7 +11,13 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from .._io import MetadataConflictWarning, TestData, read_test
+from .._io import (
+    MetadataConflictWarning,
+    TestData,
+    mask_slack,
+    pushing_samples,
+    read_test,
+)
 from .._progress import AbstractProgressMeter
 from .common import PROG, CliError, one_line
 
@@ -51,14 +58,57 @@ def read_located(read: Callable[..., TestData], path, **options) -> TestData:
 
 
 def data_options(args) -> dict:
-    """`read_test` keyword arguments from the data options of the command line."""
+    """`read_test` keyword arguments from the data options of the command line
+    (`detect_slack`: whether slack stretches are looked for, see [`read_data`][])."""
     return dict(
         columns=args.columns,
         skip_rows=args.skip_rows,
         length_mm=args.length_mm,
         diameter_mm=args.diameter_mm,
         rate_mm_per_min=args.rate_mm_per_min,
+        breaking_strain=args.breaking_strain,
         detect_slack=not args.no_slack,
+    )
+
+
+def read_data(path, options: dict, *, require_force: bool = True) -> TestData:
+    """One data file as every command reads it: `read_test` with the data options,
+    then its force cleaned by `mask_slack` whatever `--no-slack` says (which only
+    stops the search for slack stretches): a reading within the load cell's noise
+    below zero is 0 N, the tolerance being the slack threshold, max(0.5 % of the
+    peak force, 3 x the force noise estimated from the file's own second
+    differences), at most 5 % of the peak. A file without a force column (with
+    `require_force=False`, an elongation history) is read as written."""
+    options = dict(options)
+    stretches = options.pop("detect_slack", True)
+    data = read_located(
+        read_test, path, detect_slack=False, require_force=require_force, **options
+    )
+    if np.all(np.isfinite(data.force)):
+        data = mask_slack(data, stretches=stretches)
+    return data
+
+
+def pushing_error(data: TestData) -> str | None:
+    """The message for the first force reading below zero by more than the load
+    cell's noise (`jaxcable._io`'s `pushing_samples`), naming file, line and column;
+    None when there is none. Only an error where the force drives the model."""
+    pushing = pushing_samples(data)
+    if not pushing.size:
+        return None
+    i = int(pushing[0])
+    measured = data.force if data.force_raw is None else data.force_raw
+    report = data.slack_report
+    tolerance = (
+        ""
+        if report is None
+        else f" (readings down to -{report.threshold:.3g} N, the load cell's noise "
+        "about zero, are read as 0 N)"
+    )
+    return (
+        f"{data.locate(i, data.column_name('force'))}: force {measured[i]:g} N is "
+        f"negative beyond the noise{tolerance}; a cable cannot push, and this "
+        "test's force drives the model."
     )
 
 
@@ -86,10 +136,12 @@ def _thin(data: TestData, every: int) -> TestData:
     )
 
 
-def read_tests(
+def read_measured(
     paths: Sequence, options: dict, every: int, meter: AbstractProgressMeter
-) -> list[TestData]:
-    """Measured tests, read with `read_test` (canonical or raw exports).
+) -> list[tuple[TestData, str | None]]:
+    """Measured tests, read by [`read_data`][] (canonical or raw exports), each
+    with its [`pushing_error`][] found before thinning (the caller refuses it
+    where the test is force-driven).
 
     **Arguments:**
 
@@ -100,21 +152,29 @@ def read_tests(
 
     **Returns:**
 
-    The tests, each with its elongation and a cable; fails naming the file otherwise.
+    `(test, error or None)` per file, each test with its elongation and a cable;
+    fails naming the file otherwise.
     """
     tests = []
     with meter.bar("reading", len(paths)) as bar:
         for path in paths:
-            data = read_located(read_test, path, **options)
+            data = read_data(path, options)
             if data.elongation is None:
                 raise CliError(
                     f"{path}: no elongation column; a fit needs the measured "
                     "elongation (a column elongation_mm, or name it with --columns)."
                 )
             data.cable()  # raises, naming the file, when length_mm is missing
-            tests.append(_thin(data, every))
+            tests.append((_thin(data, every), pushing_error(data)))
             bar.advance(note=pathlib.Path(path).name)
     return tests
+
+
+def read_tests(
+    paths: Sequence, options: dict, every: int, meter: AbstractProgressMeter
+) -> list[TestData]:
+    """The tests of [`read_measured`][], without their force checks."""
+    return [test for test, _ in read_measured(paths, options, every, meter)]
 
 
 def describe_tests(

@@ -13,6 +13,7 @@ from .._uncertainty import TestBudget, design_test
 from .common import CliError, progress_meter, require_folder_of
 from .diagnose import run_diagnosis
 from .fit import fit_failure, read_described, run_fit, run_posterior
+from .limits import strain_at_load, with_strain_from_load
 from .models import names_option, resolve_model
 from .numbers import number, positive_float, positive_int
 from .outputs import refuse_inputs, say_replacing, write_errors
@@ -85,9 +86,11 @@ def add_design_command(commands, add_model_options, add_data_options, add_drive)
     lab.add_argument(
         "--duration-s",
         type=_positive,
-        required=True,
         metavar="S",
-        help="total duration of the test, s",
+        help="total duration of the test, s (default: that of the longest measured "
+        "test, a duration the lab has shown it can run and the data's own time "
+        "scale, so that the designed test and Park's 10-cycle yardstick are "
+        "compared on what the lab does)",
     )
     lab.add_argument(
         "--max-force-fraction",
@@ -109,7 +112,9 @@ def add_design_command(commands, add_model_options, add_data_options, add_drive)
         "--noise-mm",
         type=_positive,
         metavar="X",
-        help="elongation noise, mm (default: the fit's RMS residual)",
+        help="elongation noise, mm (default: the fit's RMS residual; with only "
+        "elongation-driven tests, its force residual through the fitted cable's "
+        "compliance at the peak force)",
     )
     lab.add_argument("--targets", metavar="NAMES", help="parameters to learn about")
     lab.add_argument(
@@ -134,6 +139,9 @@ def design_command(args) -> int:
     args.per_test = None
     separate = _pair(args.separate, targets)
     tests, drives = read_described(args, meter)
+    if args.duration_s is None:
+        args.duration_s = longest_duration(tests)
+        print(f"--duration-s: {args.duration_s:.6g} s, the longest measured test's")
     if separate:
         known = run_diagnosis(
             model,
@@ -170,11 +178,41 @@ def design_command(args) -> int:
     if failure is not None:
         raise failure
     known = result
+    # A breaking load without a breaking strain: the fitted model's strain there.
+    tests = with_strain_from_load(tests, result.models)
+    if args.noise_mm is None and all(d.control != "force" for d in drives):
+        args.noise_mm = noise_through_compliance(result, tests)
     if args.posterior:
         known = run_posterior(model, name, tests, fit_names, args, drives, result)
         print(known.summary())
         print()
     return _design_and_write(known, tests, args, targets)
+
+
+def longest_duration(tests) -> float:
+    """The duration of the longest of `tests`, s (first to last sample): the
+    default duration of a designed test."""
+    return max(float(t.time[-1] - t.time[0]) for t in tests)
+
+
+def noise_through_compliance(result, tests) -> float | None:
+    """The elongation noise, mm, of tests that are all elongation-driven (their fit
+    scores force): the RMS force residual of the first test seen through the
+    fitted cable's compliance at its peak force (the strain of a ramp to it at the
+    crosshead speed); printed. None where the model does not reach that force."""
+    rmse_N, _ = result.rmse(0)
+    test = tests[0]
+    cable = test.cable()
+    peak = test.peak_force()
+    strain = strain_at_load(result.models[0], cable, peak) if peak > 0 else None
+    if strain is None:
+        return None
+    noise = 1e3 * rmse_N * strain * float(cable.length) / peak
+    print(
+        f"--noise-mm: {noise:.3g} mm, the fit's force residual ({rmse_N:.3g} N) "
+        f"through the fitted cable's compliance at {peak:.4g} N"
+    )
+    return noise
 
 
 def _pair(text: str | None, targets) -> list[str] | None:

@@ -13,13 +13,12 @@ from .._models import AbstractCableModel
 from .._progress import AbstractProgressMeter
 from .._report import DIAGNOSIS_REPORT_FILES, write_diagnosis_report
 from .common import CliError, make_folder, progress_meter, require_folder_of
-from .data import data_options, describe_tests, read_tests
 from .fit import (
     exported_kernels,
     input_files,
     named_files,
+    read_described,
     report_files,
-    test_drives,
 )
 from .models import resolve_model
 from .outputs import refuse_inputs, say_replacing, write_errors
@@ -73,12 +72,9 @@ def diagnose_command(args) -> int:
     reports = report_files(args.report, DIAGNOSIS_REPORT_FILES) if args.report else []
     outputs = [("--out", args.out)] if args.out else []
     refuse_inputs(outputs + reports, inputs)
-    tests = read_tests(args.data, data_options(args), args.every, meter)
-    # Resolved (and printed) once here: the diagnosis then fits every fold and
-    # candidate with these drives.
-    drives = test_drives(tests, args.drive)
-    print(f"read {len(tests)} file(s):", file=log)
-    print("\n".join(describe_tests(tests, args.every, drives)), file=log)
+    # Read as every command reads; the drives resolved (and printed) once here: the
+    # diagnosis then fits every fold and candidate with these drives.
+    tests, drives = read_described(args, meter, log)
     diagnosis = run_diagnosis(
         model,
         name,

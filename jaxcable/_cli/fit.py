@@ -29,7 +29,8 @@ from .._progress import AbstractProgressMeter
 from .._report import FIT_REPORT_FILES, write_report
 from .._uncertainty import Posterior, sample_posterior
 from .common import CliError, make_folder, progress_meter, require_folder_of
-from .data import data_options, describe_tests, read_tests
+from .data import data_options, describe_tests, read_measured
+from .limits import limits_note, with_strain_from_load
 from .models import names_option, resolve_model
 from .outputs import refuse_inputs, say_replacing, write_errors
 
@@ -131,13 +132,22 @@ def test_drives(tests, drive: str):
         raise CliError(f"--drive: {e}") from None
 
 
-def read_described(args, meter: AbstractProgressMeter):
-    """(tests, drives with their reasons) of the data files, after printing one line
-    per file."""
-    tests = read_tests(args.data, data_options(args), args.every, meter)
+def read_described(args, meter: AbstractProgressMeter, log=None):
+    """(tests, drives with their reasons) of the data files, read as every command
+    reads them, after printing one line per file (and what limits the material) on
+    `log` (default stdout); fails naming file, line and column where a
+    force-driven test's force is negative beyond its noise."""
+    measured = read_measured(args.data, data_options(args), args.every, meter)
+    tests = [test for test, _ in measured]
     drives = test_drives(tests, args.drive)
-    print(f"read {len(tests)} file(s):")
-    print("\n".join(describe_tests(tests, args.every, drives)))
+    for (_, error), drive in zip(measured, drives):
+        if error is not None and drive.control == "force":
+            raise CliError(error)
+    print(f"read {len(tests)} file(s):", file=log)
+    print("\n".join(describe_tests(tests, args.every, drives)), file=log)
+    note = limits_note(tests)
+    if note:
+        print(note, file=log)
     return tests, drives
 
 
@@ -200,6 +210,9 @@ def fit_command(args) -> int:
     # one is written for inspection, then reported.
     if failure is not None and not np.isfinite(result.loss):
         raise failure
+    # What a file's breaking load means for the fitted material (said, not imposed:
+    # the next simulation with this PARAMS.json imposes it).
+    with_strain_from_load(tests, result.models)
     posterior = None
     if args.posterior and failure is None:
         posterior = run_posterior(model, name, tests, fit_names, args, drives, result)

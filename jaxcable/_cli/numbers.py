@@ -56,3 +56,10 @@ positive_float = number(
     lambda v: math.isfinite(v) and v > 0,
     "must be a positive number",
 )
+# A breaking strain: positive, or `inf` for a material that does not break.
+breaking_strain = number(
+    float,
+    "a number",
+    lambda v: v > 0 and not math.isnan(v),
+    "must be a positive number (or inf, for a material that does not break)",
+)

@@ -19,6 +19,7 @@ from .diagnose import diagnose_command
 from .fit import add_out_options, fit_command
 from .numbers import (
     MAX_SAMPLES_PER_RAMP as MAX_SAMPLES_PER_RAMP,
+    breaking_strain as _breaking_strain,
     non_negative_int as _non_negative_int,
     positive_float as _positive_float,
     positive_int as _positive_int,
@@ -53,8 +54,11 @@ def _add_model_options(parser, params_help: str) -> None:
 
 
 def _add_data_options(parser) -> None:
-    """The options that say how to read the data files (`fit`, `diagnose`)."""
-    raw = parser.add_argument_group("reading raw exports")
+    """The options that say how to read the data files: the same for every command
+    that reads them (`fit`, `diagnose`, `design`, `simulate HISTORY.csv`)."""
+    raw = parser.add_argument_group(
+        "reading data files (every command reads them alike)"
+    )
     raw.add_argument(
         "--columns",
         metavar="NAMES",
@@ -92,7 +96,23 @@ def _add_data_options(parser) -> None:
         action="store_true",
         help="do not detect slack stretches (by default, stretches where the force "
         "is about zero while the elongation moves at the crosshead's speed are "
-        "masked and not fitted; a fast recovery at zero force can look like one)",
+        "masked and not fitted; a fast recovery at zero force can look like one). "
+        "Either way a force reading below zero within the load cell's noise is read "
+        "as 0 N: the tolerance is max(0.5%% of the peak force, 3 x the noise of the "
+        "file's own force, from its second differences), at most 5%% of the peak; "
+        "a reading below it is refused, naming file, line and column, where the "
+        "force drives the model (and masked where the elongation does)",
+    )
+    limits = parser.add_argument_group("the material's limits")
+    limits.add_argument(
+        "--breaking-strain",
+        type=_breaking_strain,
+        metavar="X",
+        help="breaking strain (elongation / length at break; 'inf' for a material "
+        "that does not break): a simulation beyond it fails (replaces the files' "
+        "'# breaking_strain:'). Default: the files' value; with only a "
+        "'# breaking_load_N:', none before a fit and, after one, the fitted model's "
+        "strain at that load in a ramp at the crosshead speed; else none",
     )
 
 
@@ -180,13 +200,16 @@ _ABOUT = {
             "force, samples=10),\nrest_h or rest_s (at 0 N, samples=24). diameter_mm "
             "and rate_mm_per_min default to 3;\nid, material and description are "
             "copied to the output.\n\n"
-            "HISTORY.csv: a time-stamped force history in the canonical CSV format "
-            "('# length_mm: ...'\nmetadata, then time_s,force_N[,...]); the same file "
-            "is written with elongation_mm filled\nin (other columns and metadata "
-            "kept). With --drive elongation (or a '# control: elongation'\nline, or "
-            "no force_N column) it is an elongation history (time_s,elongation_mm) "
-            "and\nforce_N is filled in, solved sample by sample. The cable is taken from the metadata:\nlength_mm (required), "
-            "diameter_mm (default 3) and rate_mm_per_min (default 3)."
+            "HISTORY.csv: a time-stamped force history, read as 'jaxcable fit' reads "
+            "its files\n(a canonical CSV file: '# length_mm: ...' metadata, then "
+            "time_s,force_N[,...]; or a raw\nexport, with the data options); the "
+            "same file is written with elongation_mm filled in\n(other columns and "
+            "metadata kept). With --drive elongation (or a '# control: elongation'"
+            "\nline, or no force_N column) it is an elongation history "
+            "(time_s,elongation_mm) and\nforce_N is filled in, solved sample by "
+            "sample. The cable is taken from the metadata:\nlength_mm (required), "
+            "diameter_mm (default 3), rate_mm_per_min (default 3), and its\n"
+            "breaking_strain and breaking_load_N (see --breaking-strain)."
         ),
     ),
     "fit": dict(
@@ -309,6 +332,7 @@ def _simulate(commands) -> None:
         "--out", metavar="OUT.csv", required=True, help="the file to write"
     )
     _add_drive_option(sim, "of a HISTORY.csv (elongation: force_N is filled in)")
+    _add_data_options(sim)
 
 
 def _fit(commands) -> None:

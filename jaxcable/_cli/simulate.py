@@ -5,6 +5,7 @@ import dataclasses
 import pathlib
 from collections.abc import Callable
 
+import equinox as eqx
 import numpy as np
 
 from .._cable import Cable
@@ -14,10 +15,11 @@ from .._drive import (
     AbstractTestDrive,
     simulate_rate_test,
 )
-from .._io import TestData, read_canonical, read_protocol, resolve_control, write_csv
+from .._io import TestData, read_protocol, resolve_control, write_csv
 from .._results import RESULTS
 from .common import CliError, require_folder_of
-from .data import read_located
+from .data import data_options, pushing_error, read_data
+from .limits import limits_note, with_strain_from_load
 from .models import params_metadata, resolve_model
 from .outputs import refuse_inputs, say_replacing, writing
 
@@ -28,22 +30,21 @@ _COLUMN = {"force": "force_N", "elongation": "elongation_mm"}
 
 
 def _check_force(data: TestData, cable: Cable) -> None:
+    """Fail naming file, line and column unless the force, which drives the model,
+    is a cable's: not negative beyond the load cell's noise (readings within it
+    were read as 0 N), not above the breaking load."""
     # The simulation checks these too, but only knows sample indices, not file lines.
+    error = pushing_error(data)
+    if error is not None:
+        raise CliError(error)
     force = data.force
     limit = float(cable.breaking_load)
-    negative = np.flatnonzero(force < 0)
-    if negative.size:
-        i = int(negative[0])
-        raise CliError(
-            f"{data.locate(i, 'force_N')}: force {force[i]:g} N is negative (a cable "
-            "cannot push)."
-        )
     above = np.flatnonzero(force > limit)
     if above.size:
         i = int(above[0])
         raise CliError(
-            f"{data.locate(i, 'force_N')}: force {force[i]:g} N exceeds the cable's "
-            f"breaking load ({limit:g} N)."
+            f"{data.locate(i, data.column_name('force'))}: force {force[i]:g} N "
+            f"exceeds the cable's breaking load ({limit:g} N)."
         )
 
 
@@ -82,7 +83,8 @@ def _write(args, data: TestData) -> None:
 def _history_drive(args) -> tuple[TestData, AbstractTestDrive]:
     """The history file, read for its drive, and the drive: `--drive`, else the
     file's `control` line, else the channel it has (detected when it has both)."""
-    data = read_located(read_canonical, args.input, overrides={}, required=("time",))
+    options = data_options(args)
+    data = read_data(args.input, options, require_force=False)
     has_force = bool(np.all(np.isfinite(data.force)))
     if args.drive != "auto" or data.control is not None:
         drive = resolve_control(data, args.drive).drive
@@ -92,9 +94,7 @@ def _history_drive(args) -> tuple[TestData, AbstractTestDrive]:
         drive = resolve_control(data, "auto").drive
     if drive == FORCE_DRIVEN and not has_force:
         # The reader's own located error for the missing force column.
-        read_located(
-            read_canonical, args.input, overrides={}, required=("time", "force")
-        )
+        read_data(args.input, options)
     if drive.imposed_of(data) is None:
         raise CliError(
             f"{args.input}: an {drive.name}-driven history needs an "
@@ -105,10 +105,16 @@ def _history_drive(args) -> tuple[TestData, AbstractTestDrive]:
 
 def _simulate_history(args) -> int:
     data, drive = _history_drive(args)
-    cable = data.cable()
     if drive == FORCE_DRIVEN:
-        _check_force(data, cable)
+        _check_force(data, data.cable())
     name, model = resolve_model(args, per_test_hint=_PER_TEST)
+    note = limits_note([data])
+    if note and "breaking_load_N" not in data.metadata:
+        print(note)
+    # A breaking load without a breaking strain: the strain the model reaches there
+    # (the limit of this run, not written to the output).
+    (limited,) = with_strain_from_load([data], [model])
+    cable = limited.cable()
     # The measured channel as read, as `fit` drives its model: a PARAMS.json
     # re-simulates the file it was fitted to exactly as the fit saw it.
     traj = drive.simulate(model, cable, data.time, drive.imposed_of(data), throw=False)
@@ -134,7 +140,28 @@ def _simulate_history(args) -> int:
 
 
 def _simulate_protocol(args) -> int:
+    given = [
+        option
+        for option, value in (
+            ("--columns", args.columns),
+            ("--skip-rows", args.skip_rows),
+            ("--length-mm", args.length_mm),
+            ("--diameter-mm", args.diameter_mm),
+            ("--rate-mm-per-min", args.rate_mm_per_min),
+            ("--no-slack", args.no_slack or None),
+        )
+        if value is not None
+    ]
+    if given:
+        raise CliError(
+            f"{given[0]}: reads a HISTORY.csv; a protocol file gives its cable itself."
+        )
     spec = read_protocol(args.input)
+    if args.breaking_strain is not None:
+        cable = eqx.tree_at(
+            lambda c: c.breaking_strain, spec.cable, float(args.breaking_strain)
+        )
+        spec = spec._replace(cable=cable)
     name, model = resolve_model(args, per_test_hint=_PER_TEST)
     traj = simulate_rate_test(model, spec.cable, spec.protocol, throw=False)
 
@@ -144,8 +171,12 @@ def _simulate_protocol(args) -> int:
 
     _check_success(traj, name, where)
     _check_times(np.asarray(traj.time), where)
+    given = {}
+    if args.breaking_strain is not None:
+        given["breaking_strain"] = float(args.breaking_strain)
     metadata = {
         **spec.metadata,
+        **given,
         "protocol": pathlib.Path(args.input).name,
         "model": name,
         # A fit of this file drives it by its force history, as it was made.

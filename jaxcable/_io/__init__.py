@@ -18,4 +18,8 @@ from .slack import (
     SlackStretch as SlackStretch,
     force_noise as force_noise,
 )
-from .testdata import TestData as TestData, mask_slack as mask_slack
+from .testdata import (
+    TestData as TestData,
+    mask_slack as mask_slack,
+    pushing_samples as pushing_samples,
+)

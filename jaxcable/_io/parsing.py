@@ -447,6 +447,7 @@ def assemble(
             "length of the cable, mm); add a line '# length_mm: ...' above the header "
             "or pass length_mm=... (--length-mm on the command line)."
         )
+    names = {c.quantity: c.name for c in columns if c.quantity in fields}
     return TestData(
         time=fields["time"],
         force=fields.get("force", np.full(line_numbers.shape, np.nan)),
@@ -456,4 +457,5 @@ def assemble(
         metadata=metadata,
         source=str(path),
         lines=line_numbers,
+        column_names=names,
     )

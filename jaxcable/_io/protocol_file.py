@@ -20,9 +20,11 @@
 Top-level keys: `length_mm` (required, the free length, mm), `diameter_mm` (default
 3 mm), `rate_mm_per_min` (the crosshead speed of every ramp, default 3 mm/min),
 `segments` (required, a non-empty list) and the optional strings `id`, `material`,
-`description` (copied to the output's metadata). The test starts unloaded (0 N) at
-t = 0 and runs the segments in order; each segment is named by exactly one of these
-keys:
+`description` (copied to the output's metadata). The cable's breaking load is the
+3 mm rope's 2000 N scaled with the cross-section ([`jaxcable.default_breaking_load`][])
+and it has no breaking strain (`inf`) unless the caller gives one. The test starts
+unloaded (0 N) at t = 0 and runs the segments in order; each segment is named by
+exactly one of these keys:
 
 | segment | keys (units; default) | what it does |
 | --- | --- | --- |
@@ -252,7 +254,14 @@ def read_protocol(path: str | os.PathLike) -> ProtocolFile:
                 raise top.error(key, f"{_show(doc[key])} is not a string.")
             metadata[key] = doc[key]
     metadata.update(length_mm=length, diameter_mm=diameter, rate_mm_per_min=rate)
-    cable = Cable.from_mm(length_mm=length, diameter_mm=diameter, rate_mm_per_min=rate)
+    # A protocol names no material: no strain limit unless the caller gives one
+    # (`jaxcable simulate --breaking-strain`), as for a data file without one.
+    cable = Cable.from_mm(
+        length_mm=length,
+        diameter_mm=diameter,
+        rate_mm_per_min=rate,
+        breaking_strain=math.inf,
+    )
     breaking = float(cable.breaking_load)
     strongest = _MAX_STRESS_PA * float(cable.area)
 

@@ -7,7 +7,12 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from .arguments import check_read_arguments, column_notes, derive_channels
+from .arguments import (
+    check_flag,
+    check_read_arguments,
+    column_notes,
+    derive_channels,
+)
 from .parsing import (
     ColumnMap,
     assemble,
@@ -29,7 +34,9 @@ from .text import read_lines
 from .units import COLUMNS, IGNORE, accepted_names
 
 
-def _parse_columns_spec(columns: str | Sequence[str], path) -> list[ColumnMap]:
+def _parse_columns_spec(
+    columns: str | Sequence[str], path, required: tuple[str, ...]
+) -> list[ColumnMap]:
     """The column map named by `columns` (`"time_s,elongation_mm,force_N,-"`)."""
     tokens = (
         [t.strip() for t in columns.split(",")]
@@ -59,7 +66,9 @@ def _parse_columns_spec(columns: str | Sequence[str], path) -> list[ColumnMap]:
             f"({accepted_names(quantity)})."
         )
 
-    return map_names(tokens, unknown=unknown, repeated=repeated, missing=missing)
+    return map_names(
+        tokens, unknown=unknown, repeated=repeated, missing=missing, required=required
+    )
 
 
 def read_test(
@@ -73,10 +82,12 @@ def read_test(
     temperature_C: float | None = None,
     material: str | None = None,
     id: str | None = None,
+    breaking_strain: float | None = None,
     encoding: str | None = None,
     delimiter: str | None = None,
     detect_slack: bool = True,
     slack_threshold_N: float | None = None,
+    require_force: bool = True,
 ) -> TestData:
     """Read one test from a canonical CSV file or a raw tensile-tester export.
 
@@ -148,7 +159,9 @@ def read_test(
         top of the file (blank, metadata, preamble, header and unit lines alike);
         `None` to detect it.
     - `length_mm`, `diameter_mm`, `rate_mm_per_min`, `temperature_C`, `material`,
-        `id`: metadata that replace the file's (mm, mm, mm/min, °C); where one
+        `id`, `breaking_strain`: metadata that replace the file's (mm, mm, mm/min,
+        °C; the breaking strain dimensionless, `math.inf` for a material that does
+        not break, see [`jaxcable.TestData.cable`][]); where one
         differs from the file's by more than rounding (0.1 %), a
         [`jaxcable.MetadataConflictWarning`][] names both (the command line prints
         it as one line). `length_mm` is required, from the file or here.
@@ -157,6 +170,9 @@ def read_test(
     - `detect_slack`: whether to detect and mask slack stretches.
     - `slack_threshold_N`: the slack force threshold, N, or `None` for the default
         rule.
+    - `require_force`: whether the file must have a force column; `False` reads a
+        canonical elongation history (`time_s,elongation_mm`) with NaN forces, for
+        an elongation-driven simulation (no slack detection then).
 
     **Returns:**
 
@@ -183,6 +199,7 @@ def read_test(
         "temperature_C": temperature_C,
         "material": material,
         "id": id,
+        "breaking_strain": breaking_strain,
     }
     check_read_arguments(
         path,
@@ -194,6 +211,8 @@ def read_test(
         detect_slack,
         slack_threshold_N,
     )
+    check_flag(require_force, "require_force")
+    required = ("time", "force") if require_force else ("time",)
     lines = read_lines(path, encoding)
     metadata, first = parse_metadata(lines, path)
     given = {
@@ -215,7 +234,7 @@ def read_test(
             )
         sep = delimiter
         decimal_comma = sep != "," and sniff_separator(lines, first) == (sep, True)
-    spec = None if columns is None else _parse_columns_spec(columns, path)
+    spec = None if columns is None else _parse_columns_spec(columns, path, required)
     if skip_rows is None:
         start = find_data_start(lines, first, sep, decimal_comma, spec, path)
     else:
@@ -230,7 +249,9 @@ def read_test(
             )
         start = int(skip_rows)
     if spec is None:
-        column_map, header_line = header_columns(lines, first, start, sep, path)
+        column_map, header_line = header_columns(
+            lines, first, start, sep, path, required
+        )
         named_by = "the header"
         if skip_rows is None:
             start = data_below_header(lines, header_line, start, sep)
@@ -249,6 +270,6 @@ def read_test(
     data = assemble(path, column_map, values, line_numbers, metadata, header_line)
     if notes:
         data = dataclasses.replace(data, notes=notes)
-    if detect_slack:
+    if detect_slack and np.all(np.isfinite(data.force)):
         data = mask_slack(data, threshold_N=slack_threshold_N)
     return data

@@ -284,14 +284,19 @@ def _read_as(quantity: str | None, unit: str | None, token: str | None) -> str:
 
 
 def header_columns(
-    lines: list[str], first: int, start: int, sep: str, path
+    lines: list[str],
+    first: int,
+    start: int,
+    sep: str,
+    path,
+    required: tuple[str, ...] = ("time", "force"),
 ) -> tuple[list[ColumnMap], int]:
     """The column map from the rows above the data (`lines[first:start]`).
 
-    A row with a canonical name (`time_s`, ...) is the canonical header. Otherwise,
-    from the bottom up, the first row whose names match a time and a force column
-    (`Time (s)`, `时间` over a units row `(s)`, ...) is used, its other columns
-    ignored.
+    A row with a canonical name (`time_s`, ...) is the canonical header, which must
+    name the `required` quantities. Otherwise, from the bottom up, the first row
+    whose names match a time and a force column (`Time (s)`, `时间` over a units
+    row `(s)`, ...) is used, its other columns ignored.
 
     **Returns:**
 
@@ -309,7 +314,10 @@ def header_columns(
         )
     for index, names in rows:
         if any(name in COLUMNS for name in names):
-            return map_columns(names, path, index + 1, positions=True), index + 1
+            columns = map_columns(
+                names, path, index + 1, positions=True, required=required
+            )
+            return columns, index + 1
     unit_rows = {index for index, cells in rows if _is_units_row(cells)}
     reasons = []
     for k in range(len(rows) - 1, -1, -1):

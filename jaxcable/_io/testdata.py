@@ -7,9 +7,19 @@ import math
 
 import numpy as np
 
-from .._cable import Cable, speed_from_mm_per_min
+from .._cable import (
+    DEFAULT_DIAMETER_MM,
+    Cable,
+    default_breaking_load,
+    speed_from_mm_per_min,
+)
 from .slack import SlackReport, detect_slack
-from .units import COLUMNS, QUANTITIES
+from .units import COLUMNS, QUANTITIES, written_name
+
+
+# The canonical column name of each quantity, for messages about a TestData not
+# read from a file.
+_WRITTEN = {quantity: written_name(quantity) for quantity in QUANTITIES}
 
 
 # The metadata keys that describe the cable, named as the arguments of
@@ -70,6 +80,9 @@ class TestData:
         [`jaxcable.read_csv`][]).
     - `notes`: one line each about how the file was read that is no error (the
         columns of an instrument export that are not read).
+    - `column_names`: per quantity (`"time"`, `"force"`, ...), the name of its
+        column in `source` (`"Load"` of an Instron export), for error messages;
+        empty when not read from a file.
     """
 
     # pytest would otherwise try to collect this class wherever it is imported.
@@ -87,6 +100,7 @@ class TestData:
     force_raw: np.ndarray | None = None
     slack_report: SlackReport | None = None
     notes: tuple[str, ...] = ()
+    column_names: dict[str, str] = dataclasses.field(default_factory=dict)
 
     def __post_init__(self):
         arrays = {"time": self.time, "force": self.force}
@@ -133,6 +147,7 @@ class TestData:
         object.__setattr__(self, "extra", extra)
         object.__setattr__(self, "metadata", dict(self.metadata))
         object.__setattr__(self, "notes", tuple(str(n) for n in self.notes))
+        object.__setattr__(self, "column_names", dict(self.column_names))
         if self.lines is not None:
             object.__setattr__(self, "lines", np.asarray(self.lines, dtype=int))
 
@@ -155,8 +170,16 @@ class TestData:
         `length_mm` is required; `diameter_mm` defaults to 3 mm and `rate_mm_per_min`
         (the crosshead speed) to 3 mm/min, Park's Dyneema SK78 test. The temperature
         is the metadata's `temperature_C`, else the mean of the temperature column,
-        else the `Cable` default (20 °C); the breaking load is `breaking_load_N` and
-        the breaking strain `breaking_strain` when given, else the `Cable` defaults.
+        else the `Cable` default (20 °C).
+
+        A material's limits come from its data. The breaking strain is
+        `breaking_strain` when given (`inf`: a material that does not break), else
+        none (`inf`): the `Cable` default is a Dyneema rope's, which must not stop
+        another material's simulation; a file with only a breaking load gets its
+        strain from a fitted model (the command line does so after a fit). The
+        breaking load is `breaking_load_N` when given, else the 3 mm rope's 2000 N
+        scaled with the cross-section ([`jaxcable.default_breaking_load`][]), and
+        never below the largest force the test measured (the cable carried it).
 
         **Returns:**
 
@@ -179,7 +202,23 @@ class TestData:
                     ) from None
         if "temperature_C" not in mm and self.temperature is not None:
             mm["temperature_C"] = float(np.mean(self.temperature))
+        mm.setdefault("breaking_strain", math.inf)
+        if "breaking_load_N" not in mm:
+            scaled = default_breaking_load(mm.get("diameter_mm", DEFAULT_DIAMETER_MM))
+            mm["breaking_load_N"] = max(scaled, self.peak_force())
         return Cable.from_mm(**mm)
+
+    def peak_force(self) -> float:
+        """The largest force the test measured, N (`force_raw` where set; 0 when
+        there is no finite positive force, e.g. an elongation history)."""
+        measured = self.force if self.force_raw is None else self.force_raw
+        finite = measured[np.isfinite(measured)]
+        return max(float(np.max(finite)), 0.0) if finite.size else 0.0
+
+    def column_name(self, quantity: str) -> str:
+        """The name of `quantity`'s column in the file (`"Load"`), else its
+        canonical name (`"force_N"`), for error messages."""
+        return self.column_names.get(quantity, _WRITTEN.get(quantity, quantity))
 
     def locate(self, index: int, column: str | None = None) -> str:
         """Where sample `index` came from: `file, line N, column 'name'` (for errors)."""
@@ -189,7 +228,9 @@ class TestData:
         return where(self.source, int(self.lines[index]), column)
 
 
-def mask_slack(data: TestData, *, threshold_N: float | None = None) -> TestData:
+def mask_slack(
+    data: TestData, *, threshold_N: float | None = None, stretches: bool = True
+) -> TestData:
     """Detect the slack stretches of a test, mask them and clip negative forces.
 
     A slack stretch is a run of samples with the force below a threshold while the
@@ -209,6 +250,9 @@ def mask_slack(data: TestData, *, threshold_N: float | None = None) -> TestData:
         can be re-run) and the crosshead speed from `rate_mm_per_min` when the
         metadata has it (else it is estimated from the elongation).
     - `threshold_N`: the force threshold, N, or `None` for the rule above.
+    - `stretches`: whether to look for slack stretches; without, only the readings
+        below minus the threshold are masked and the negative forces clipped (the
+        command line's `--no-slack`: every command still sees the same force).
 
     **Returns:**
 
@@ -233,10 +277,12 @@ def mask_slack(data: TestData, *, threshold_N: float | None = None) -> TestData:
     measured = data.force if data.force_raw is None else data.force_raw
     rate = data.metadata.get("rate_mm_per_min")
     speed = None if rate is None else speed_from_mm_per_min(float(rate))
+    if not isinstance(stretches, bool | np.bool_):
+        raise TypeError(f"`stretches` must be True or False, got {stretches!r}.")
     mask, force, report = detect_slack(
         data.time,
         measured,
-        data.elongation,
+        data.elongation if stretches else None,
         speed=speed,
         threshold=threshold_N,
         lines=data.lines,
@@ -248,3 +294,28 @@ def mask_slack(data: TestData, *, threshold_N: float | None = None) -> TestData:
         mask=mask,
         slack_report=report,
     )
+
+
+def pushing_samples(data: TestData) -> np.ndarray:
+    """The samples whose measured force is below minus the noise tolerance, outside
+    the slack stretches: readings that a load cell's noise about zero does not
+    explain (a cable cannot push). The tolerance is the slack threshold of
+    [`jaxcable.mask_slack`][] (`data.slack_report.threshold`, from the file's own
+    force noise); without a slack report, every negative force.
+
+    **Arguments:**
+
+    - `data`: a [`jaxcable.TestData`][].
+
+    **Returns:**
+
+    The sample indices, in order (an integer array, empty when there is none).
+    """
+    measured = data.force if data.force_raw is None else data.force_raw
+    report = data.slack_report
+    if report is None:
+        return np.flatnonzero(measured < 0)
+    below = measured < -report.threshold
+    for stretch in report.stretches:
+        below[stretch.start : stretch.stop] = False
+    return np.flatnonzero(below)

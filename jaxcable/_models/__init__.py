@@ -50,6 +50,10 @@ from .fields import (
     setting as setting,
     transform_table as transform_table,
 )
+from .findley import (
+    FindleyModel as FindleyModel,
+    FindleyState as FindleyState,
+)
 from .park import (
     IntegratedModel as IntegratedModel,
     IntegratedState as IntegratedState,

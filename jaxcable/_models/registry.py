@@ -25,6 +25,7 @@ from .fields import (
     identifiable as identifiable,
     parameter_info as parameter_info,
 )
+from .findley import FindleyModel
 from .park import IntegratedModel
 from .piao import FiveElementModel
 
@@ -66,6 +67,7 @@ MODELS: tuple[ModelEntry, ...] = tuple(
         HookeModel,
         BurgersModel,
         BoucWenModel,
+        FindleyModel,
     )
 )
 DEFAULT_CLI_MODEL = IntegratedModel.CLI_NAME
