@@ -172,7 +172,8 @@ def test_module_entry_point_reports_bad_input(tmp_path):
     )
     assert proc.returncode == 2
     message = _one_error_line(proc.stderr)
-    assert f"{src}, line 4, column 'force_N'" in message
+    # As `fit` reads it: the column's position and name.
+    assert f"{src}, line 4, column 2 'force_N'" in message
 
 
 # ----------------------------------------------------------------------------------

@@ -19,7 +19,7 @@ from .._io import TestData, read_protocol, resolve_control, write_csv
 from .._results import RESULTS
 from .common import CliError, require_folder_of
 from .data import data_options, pushing_error, read_data
-from .limits import limits_note, with_strain_from_load
+from .limits import with_strain_from_load
 from .models import params_metadata, resolve_model
 from .outputs import refuse_inputs, say_replacing, writing
 
@@ -108,9 +108,6 @@ def _simulate_history(args) -> int:
     if drive == FORCE_DRIVEN:
         _check_force(data, data.cable())
     name, model = resolve_model(args, per_test_hint=_PER_TEST)
-    note = limits_note([data])
-    if note and "breaking_load_N" not in data.metadata:
-        print(note)
     # A breaking load without a breaking strain: the strain the model reaches there
     # (the limit of this run, not written to the output).
     (limited,) = with_strain_from_load([data], [model])
