@@ -14,7 +14,7 @@ from .common import CliError, progress_meter, require_folder_of
 from .diagnose import run_diagnosis
 from .fit import fit_failure, read_described, run_fit, run_posterior
 from .limits import strain_at_load, with_strain_from_load
-from .models import names_option, resolve_model
+from .models import data_start, names_option, resolve_model
 from .numbers import number, positive_float, positive_int
 from .outputs import refuse_inputs, say_replacing, write_errors
 
@@ -139,6 +139,7 @@ def design_command(args) -> int:
     args.per_test = None
     separate = _pair(args.separate, targets)
     tests, drives = read_described(args, meter)
+    model = data_start(args, model, tests, [d.drive for d in drives])
     if args.duration_s is None:
         args.duration_s = longest_duration(tests)
         print(f"--duration-s: {args.duration_s:.6g} s, the longest measured test's")

@@ -20,7 +20,7 @@ from .fit import (
     read_described,
     report_files,
 )
-from .models import resolve_model
+from .models import data_start, resolve_model
 from .outputs import refuse_inputs, say_replacing, write_errors
 
 
@@ -75,6 +75,7 @@ def diagnose_command(args) -> int:
     # Read as every command reads; the drives resolved (and printed) once here: the
     # diagnosis then fits every fold and candidate with these drives.
     tests, drives = read_described(args, meter, log)
+    model = data_start(args, model, tests, [d.drive for d in drives])
     diagnosis = run_diagnosis(
         model,
         name,

@@ -31,7 +31,7 @@ from .._uncertainty import Posterior, sample_posterior
 from .common import CliError, make_folder, progress_meter, require_folder_of
 from .data import data_options, describe_tests, read_measured
 from .limits import limits_note, with_strain_from_load
-from .models import names_option, resolve_model
+from .models import data_start, names_option, resolve_model
 from .outputs import refuse_inputs, say_replacing, write_errors
 
 
@@ -192,6 +192,7 @@ def fit_command(args) -> int:
         outputs += report_files(args.report, names)
     refuse_inputs(outputs, input_files(args))
     tests, drives = read_described(args, meter)
+    model = data_start(args, model, tests, [d.drive for d in drives])
     result = run_fit(
         model,
         name,

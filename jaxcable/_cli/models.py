@@ -13,7 +13,7 @@ import equinox as eqx
 import numpy as np
 
 from .. import _checks
-from .._fit import FitResult
+from .._fit import FitResult, scaled_start
 from .._io import read_json
 from .._models import (
     BY_CLI_NAME,
@@ -206,6 +206,28 @@ def resolve_model(args, *, per_test_hint: str) -> tuple[str, AbstractCableModel]
     name = requested or DEFAULT_CLI_MODEL
     params = _check_plain_params(path, doc, BY_CLI_NAME[name].cls, name)
     return name, _build_model(name, params, path)
+
+
+def data_start(args, model: AbstractCableModel, tests, drives) -> AbstractCableModel:
+    """The start of a command that fits `tests`: the model `--params` gives, as
+    given (a fit moves it only if it fails on a test); with no `--params`, the
+    default model scaled to the data ([`jaxcable.scaled_start`][]: its moduli to the
+    first loading, its times to the holds when far off).
+
+    **Arguments:**
+
+    - `args`: the parsed command line (`params`).
+    - `model`: the model of `resolve_model`.
+    - `tests`: the data read.
+    - `drives`: each test's drive.
+
+    **Returns:**
+
+    The start model.
+    """
+    if args.params:
+        return model
+    return scaled_start(model, tests, drive=list(drives))
 
 
 def params_metadata(model: AbstractCableModel) -> str:

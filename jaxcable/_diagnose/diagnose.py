@@ -32,9 +32,11 @@ named stages, each a function with a typed result:
    extended model, until nothing is left to name.
 """
 
+import warnings
 from collections.abc import Sequence
 from typing import Literal
 
+from .._fit import StartMovedWarning, start_failure, start_scaling
 from .._models import AbstractCableModel, IntegratedModel
 from .._progress import AbstractProgressMeter, NoProgressMeter, check_progress_meter
 from .result import Diagnosis
@@ -112,7 +114,10 @@ def diagnose(
 
     - `tests`: the measured tests ([`jaxcable.TestData`][] with elongation).
     - `model`: the base model and its start values (default
-        [`jaxcable.IntegratedModel`][] with its defaults).
+        [`jaxcable.IntegratedModel`][] with its defaults scaled to the data,
+        [`jaxcable.scaled_start`][]). A start that fails on a test (outside its
+        domain, not finite, beyond break) is moved to the start scaled to the data,
+        with a [`jaxcable.StartMovedWarning`][] that says why.
     - `fit_names`: the base parameters to fit (default: the model's identifiable
         parameters in the model registry, for the integrated model Park's six of
         `PARK_IDENTIFIABLE`; else all).
@@ -151,10 +156,9 @@ def diagnose(
     `holdout`, too few tests for leave-one-test-out, a bad `drive`; and the errors of
     [`jaxcable.fit`][] for bad data.
     """
-    if model is None:
-        model = IntegratedModel()
     check_max_rounds(max_rounds)
     meter = check_progress_meter(progress_meter, NoProgressMeter())
+    model = _data_start(model, tests, drive, meter)
     options = dict(
         split=split,
         holdout=holdout,
@@ -175,3 +179,18 @@ def diagnose(
             options=options,
             progress_meter=meter,
         )
+
+
+def _data_start(model, tests, drive, meter: AbstractProgressMeter):
+    """The start of a diagnosis: the default model scaled to the data when `model`
+    is None; else `model`, moved (scaled to the data) only when it fails on a test."""
+    if model is None:
+        return start_scaling(IntegratedModel(), tests, drive=drive).model
+    reason = start_failure(model, tests, drive=drive)
+    if not reason:
+        return model
+    scaling = start_scaling(model, tests, drive=drive)
+    note = f"{reason}; moved to the start scaled to the data: {scaling.describe()}"
+    warnings.warn(note, StartMovedWarning, stacklevel=3)
+    meter.say(f"start moved: {note}")
+    return scaling.model

@@ -21,4 +21,12 @@ from .solver import (
     residuals_and_jacobian as residuals_and_jacobian,
     with_jacobian_jvp as with_jacobian_jvp,
 )
+from .start import (
+    StartMovedWarning as StartMovedWarning,
+    StartScaling as StartScaling,
+    retardation_times as retardation_times,
+    scaled_start as scaled_start,
+    start_failure as start_failure,
+    start_scaling as start_scaling,
+)
 from .statistics import IdentifiabilityWarning as IdentifiabilityWarning

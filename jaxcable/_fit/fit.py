@@ -31,11 +31,13 @@ from .exported import current_fit_kernel
 from .parameters import test_slice
 from .problem import (
     Problem,
+    StartError,
     make_problem,
     require_enough_samples,
 )
 from .result import FitResult, concrete_result
 from .solver import KernelOut, LevenbergMarquardt
+from .start import StartMovedWarning, start_scaling
 from .statistics import (
     IdentifiabilityWarning,
     Statistics,
@@ -64,8 +66,9 @@ def _checked_solver(multistart, max_steps, spread, solver) -> optx.AbstractGauss
 
 
 def _require_valid_start(out: KernelOut, tests: list, problem: Problem) -> None:
-    """Raise if the user's start does not simulate finitely on every test, with the
-    simulation's own reason (re-run for the first such test, by its drive)."""
+    """Raise a `StartError` if the user's start does not simulate finitely on every
+    test, with the simulation's own reason (re-run for the first such test, by its
+    drive)."""
     bad = np.flatnonzero(~np.asarray(out.start_ok))
     if not bad.size:
         return
@@ -79,11 +82,40 @@ def _require_valid_start(out: KernelOut, tests: list, problem: Problem) -> None:
         "the simulation is not finite or a parameter is outside its domain for this "
         "cable (e.g. Park's t_r2 = lambda1 (L0/v)^2 - lambda2 <= 0)"
     )
-    raise ValueError(
+    raise StartError(
         f"`model`: the start parameters fail on tests[{i}] ({test_id(test, i)}, "
-        f"{drive}-driven): {reason.rstrip('.')}. Give start values valid for every "
-        "test."
+        f"{drive}-driven): {reason.rstrip('.')}.",
+        i,
+        reason.rstrip("."),
     )
+
+
+def with_moved_start(model, test_list: list, drive, attempt):
+    """`(attempt(model), "")`; when the start fails on a test (a `StartError`),
+    `(attempt(scaled), note)` with the start scaled to the data
+    ([`jaxcable.scaled_start`][]) and a note saying why it was moved (also issued as
+    a [`jaxcable.StartMovedWarning`][]). A scaled start that fails too raises
+    `ValueError` naming `model`, with both reasons."""
+    try:
+        return attempt(model), ""
+    except StartError as first:
+        scaling = start_scaling(model, test_list, drive=drive)
+        i = first.index
+        note = (
+            f"the start failed on tests[{i}] ({test_id(test_list[i], i)}): "
+            f"{first.reason}; moved to the start scaled to the data: "
+            f"{scaling.describe()}"
+        )
+        try:
+            result = attempt(scaling.model)
+        except StartError as second:
+            raise ValueError(
+                f"{first} The start scaled to the data ({scaling.describe()}) "
+                f"fails too: {second.reason}. Check the data's breaking strain and "
+                "load, or give start values valid for every test."
+            ) from None
+        warnings.warn(note, StartMovedWarning, stacklevel=3)
+        return result, note
 
 
 def run_kernel(
@@ -230,6 +262,14 @@ def fit(
     then NaN and the solver rejects the step. A start on the bound of `1 + exp(u)` or
     `beta tanh(u)` (e.g. the Bouc-Wen default n = 1) is moved 1 % inside.
 
+    **A start that fails.** A start outside its domain for a test's cable, or whose
+    simulation of a test is not finite or goes beyond the cable's break, is moved,
+    not refused: the fit starts instead from [`jaxcable.scaled_start`][]`(model,
+    tests)` (its moduli scaled to the data's first loading, its times to the data's
+    holds when far off), `FitResult.start_note` says why and how, and a
+    [`jaxcable.StartMovedWarning`][] is issued. Only a scaled start that fails too
+    raises.
+
     **Initial guess.** From the start `model`, every stiffness-like fitted parameter
     (moduli and viscosities times c; the Bouc-Wen compliance `z_y` divided by c) is
     scaled by one factor c found in closed form: the least-squares multiplier
@@ -298,27 +338,35 @@ def fit(
 
     **Raises:**
 
-    `ValueError` naming the argument: `model` not a model, batched, or failing on a
-    test at its start values; `tests` empty or malformed (see
+    `ValueError` naming the argument: `model` not a model or batched, or failing on
+    a test both at its start values and scaled to the data (below); `tests` empty
+    or malformed (see
     [`jaxcable.pad_tests`][]); an unknown or repeated name in `fit`, `per_test` or
     `transforms`; fewer fitted samples than parameters; a bad `multistart`,
     `max_steps`, `spread` or `solver`.
     """
     solver = _checked_solver(multistart, max_steps, spread, solver)
     test_list = as_test_list(tests)
-    problem, u_user = make_problem(
-        model, test_list, fit, per_test, transforms, drive, covariate
-    )
+
+    def attempt(start):
+        problem, u_user = make_problem(
+            start, test_list, fit, per_test, transforms, drive, covariate
+        )
+        p = problem.layout.size
+        n = require_enough_samples(problem.data, p)
+        jac = "fwd" if p <= n else "bwd"
+        out = run_kernel(
+            problem, u_user, key, solver, max_steps, jac, multistart, spread, test_list
+        )
+        return problem, out
+
+    (problem, out), note = with_moved_start(model, test_list, drive, attempt)
     layout = problem.layout
-    p = layout.size
-    n = require_enough_samples(problem.data, p)
-    jac = "fwd" if p <= n else "bwd"
-    out = run_kernel(
-        problem, u_user, key, solver, max_steps, jac, multistart, spread, test_list
-    )
     units = tuple(u for u, s in zip(layout.units, layout.sizes) for _ in range(s))
     per = tuple(n for n, q in zip(layout.names, layout.per_test) if q)
-    return fit_result(out, problem, test_list, layout.labels, units, per, throw)
+    return fit_result(
+        out, problem, test_list, layout.labels, units, per, throw, start_note=note
+    )
 
 
 # The table of reparameterisations is derived from the models' declarations
@@ -338,11 +386,12 @@ def fit_result(
     units: tuple[str, ...],
     per_test: tuple[str, ...],
     throw: bool,
+    start_note: str = "",
 ) -> FitResult:
     """The [`jaxcable.FitResult`][] of a kernel's output (`labels`, `units`: of each
-    entry of the output's `natural`; `per_test`: the names fitted per test); with
-    `throw`, a `RuntimeError` when no start converged. Identifiability warnings are
-    issued."""
+    entry of the output's `natural`; `per_test`: the names fitted per test;
+    `start_note`: how the start was moved, "" when it was not); with `throw`, a
+    `RuntimeError` when no start converged. Identifiability warnings are issued."""
     num_samples = np.asarray(problem.data.weight).sum(axis=1).astype(int)
     n = int(num_samples.sum())
     result, ssr, stats = _outcome(out, labels, n, throw)
@@ -373,6 +422,7 @@ def fit_result(
         num_steps=int(np.asarray(out.steps)[int(out.best)]),
         start_losses=np.asarray(out.ssr, float),
         per_test=per_test,
+        start_note=start_note,
     )
 
 

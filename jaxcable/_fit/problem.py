@@ -42,6 +42,23 @@ _DOMAIN_MESSAGE = (
 )
 
 
+class StartError(ValueError):
+    """The start values fail on a test: outside their domain for its cable, or a
+    simulation that is not finite or goes beyond break. [`jaxcable.fit`][] moves
+    such a start ([`jaxcable.scaled_start`][]) rather than refusing it.
+
+    **Attributes:**
+
+    - `index`: the first test it fails on.
+    - `reason`: why, in words.
+    """
+
+    def __init__(self, message: str, index: int, reason: str):
+        super().__init__(message)
+        self.index = index
+        self.reason = reason
+
+
 def _at_sample(cable, temperature, covariate):
     """The cable at one sample: its recorded temperature (K) and covariate."""
     return eqx.tree_at(
@@ -334,9 +351,11 @@ def _checked_model(model, data: PaddedTests, tests) -> dict:
     # The parameter-domain check is cheap; a model that fails it would fail every
     # simulation of the fit, so it is reported before anything else compiles.
     for i in np.flatnonzero(~np.asarray(_check_model(model, data.cable))):
-        raise ValueError(
+        raise StartError(
             f"`model`: its parameters are outside their domain for tests[{i}] "
-            f"({test_id(tests[i], i)}): {_DOMAIN_MESSAGE}"
+            f"({test_id(tests[i], i)}): {_DOMAIN_MESSAGE}",
+            int(i),
+            _DOMAIN_MESSAGE.rstrip("."),
         )
     return declared
 

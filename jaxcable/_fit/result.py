@@ -95,6 +95,9 @@ class FitResult:
         writes their names.
     - `loss_unit`: `"m^2"` (every test force-driven), `"N^2"` (every test
         elongation-driven) or `"1"` (both: residuals in noise units).
+    - `start_note`: "" when the fit started from the given start; else why that
+        start failed on a test and how it was moved (scaled to the data,
+        [`jaxcable.scaled_start`][]).
     """
 
     model: AbstractCableModel
@@ -119,6 +122,7 @@ class FitResult:
     rmse_N: np.ndarray | None = None
     drives: tuple[AbstractTestDrive, ...] = ()
     loss_unit: str = "m^2"
+    start_note: str = ""
 
     @property
     def converged(self) -> bool:
@@ -212,6 +216,8 @@ class FitResult:
                 lines.append(f"{name:<{width}}" + "".join(f"{c:>8.3f}" for c in row))
         if self.warnings:
             lines += ["", "warnings:"] + [f"  - {w}" for w in self.warnings]
+        if self.start_note:
+            lines += ["", f"start moved: {self.start_note}"]
         return "\n".join(lines)
 
     def to_json(self, path: str | os.PathLike | None = None) -> str:
@@ -272,6 +278,7 @@ class FitResult:
             "num_steps": int(self.num_steps),
             "start_losses": [jsonable(float(x)) for x in self.start_losses],
             "warnings": list(self.warnings),
+            "start_note": self.start_note,
         }
         text = json.dumps(document, indent=2)
         if path is not None:
@@ -362,4 +369,5 @@ class FitResult:
                 [from_json_number(x) for x in doc.get("start_losses", [])]
             ),
             per_test=tuple(doc.get("per_test", [])),
+            start_note=doc.get("start_note", ""),
         )

@@ -22,7 +22,7 @@ from jaxtyping import PRNGKeyArray
 
 from .._models import AbstractCableModel
 from .data import as_test_list, pad_tests
-from .fit import _checked_solver, fit_result, run_kernel
+from .fit import _checked_solver, fit_result, run_kernel, with_moved_start
 from .parameters import Layout, declared_parameters, field_at
 from .problem import (
     _checked_model,
@@ -128,47 +128,52 @@ def fit_subset(
             f"`model`: a {type(model).__name__} has no parameters {missing} of the "
             "layout; give the model the layout was made for."
         )
-    _checked_model(model, data, test_list)
-    params, static = eqx.partition(model, eqx.is_inexact_array)
-    # Strongly typed leaves: a start value given as a Python float is weakly typed,
-    # and another weak type would be another program.
-    params = jax.tree.map(lambda x: jnp.asarray(x, x.dtype), params)
-    p = layout.size
     order = [i for i, name in enumerate(layout.names) if name in free]
-    for i in order:
-        name, value = layout.names[i], float(field_at(model, layout.names[i]))
-        if layout.transforms[i] == "log" and not value > 0:
-            raise ValueError(
-                f"`model.{name}` = {value} is fitted on a log scale and must start "
-                "positive."
-            )
-    scales, fixed = _start(model, layout, only=free)
-    mask = np.isin(np.arange(p), order)
-    require_enough_samples(data, len(order))
-    dtype = jnp.result_type(float)
-    select = np.array(order + [p] * (size - len(order)), np.int32)
-    v0 = np.concatenate([fixed[order], np.zeros(size - len(order))])
-    problem = build_problem(
-        layout,
-        params,
-        static,
-        scales,
-        data,
-        select=jnp.asarray(select),
-        fixed=jnp.asarray(fixed, dtype),
-        free=jnp.asarray(mask),
-    )
-    out = run_kernel(
-        problem,
-        jnp.asarray(v0, dtype),
-        key,
-        solver,
-        max_steps,
-        "fwd",
-        multistart,
-        spread,
-        test_list,
-    )
+
+    def attempt(model):
+        # Checked, then run: a start that fails on a test is moved (as `fit`).
+        _checked_model(model, data, test_list)
+        params, static = eqx.partition(model, eqx.is_inexact_array)
+        # Strongly typed leaves: a start value given as a Python float is weakly typed,
+        # and another weak type would be another program.
+        params = jax.tree.map(lambda x: jnp.asarray(x, x.dtype), params)
+        p = layout.size
+        for i in order:
+            name, value = layout.names[i], float(field_at(model, layout.names[i]))
+            if layout.transforms[i] == "log" and not value > 0:
+                raise ValueError(
+                    f"`model.{name}` = {value} is fitted on a log scale and must start "
+                    "positive."
+                )
+        scales, fixed = _start(model, layout, only=free)
+        mask = np.isin(np.arange(p), order)
+        require_enough_samples(data, len(order))
+        dtype = jnp.result_type(float)
+        select = np.array(order + [p] * (size - len(order)), np.int32)
+        v0 = np.concatenate([fixed[order], np.zeros(size - len(order))])
+        problem = build_problem(
+            layout,
+            params,
+            static,
+            scales,
+            data,
+            select=jnp.asarray(select),
+            fixed=jnp.asarray(fixed, dtype),
+            free=jnp.asarray(mask),
+        )
+        return problem, run_kernel(
+            problem,
+            jnp.asarray(v0, dtype),
+            key,
+            solver,
+            max_steps,
+            "fwd",
+            multistart,
+            spread,
+            test_list,
+        )
+
+    (problem, out), note = with_moved_start(model, test_list, drive, attempt)
     k = len(order)
     # The fitted coordinates' block: the padding ones carry zero columns.
     out = eqx.tree_at(
@@ -182,4 +187,6 @@ def fit_subset(
     )
     labels = tuple(layout.names[i] for i in order)
     units = tuple(layout.units[i] for i in order)
-    return fit_result(out, problem, test_list, labels, units, (), throw)
+    return fit_result(
+        out, problem, test_list, labels, units, (), throw, start_note=note
+    )

@@ -26,6 +26,8 @@ from .extensions import (
     CovariateStrainState as CovariateStrainState,
     DiscoveredTerm as DiscoveredTerm,
     DiscoveredTermState as DiscoveredTermState,
+    Hardening as Hardening,
+    HardeningState as HardeningState,
     Hereditary as Hereditary,
     HereditaryState as HereditaryState,
     MechanoSorptive as MechanoSorptive,

@@ -7,7 +7,7 @@ reduced time), `apparatus.py` (what the test set-up adds) and `covariate.py` (wh
 recorded covariate drives). [`EXTENSIONS`][] lists
 the candidates of the diagnosis.
 
-At the null value of its effect parameter (`weight = 0`, `E_k = inf`, `n = 0`,
+At the null value of its effect parameter (`beta = 0`, `weight = 0`, `E_k = inf`, `n = 0`,
 `activation_energy = 0`, `c1 = 0`, `compliance = 0`, `s_b = 0`, `drift_rate = 0`)
 every extension reproduces its base model exactly.
 
@@ -36,6 +36,8 @@ from .covariate import (
     MechanoSorptiveState as MechanoSorptiveState,
 )
 from .creep import (
+    Hardening as Hardening,
+    HardeningState as HardeningState,
     Hereditary as Hereditary,
     HereditaryState as HereditaryState,
     SecondRetardation as SecondRetardation,
@@ -60,6 +62,7 @@ from .temperature import (
 EXTENSIONS: dict[str, type[AbstractExtension]] = {
     cls.EXTENSION_ID: cls
     for cls in (
+        Hardening,
         Hereditary,
         SecondRetardation,
         StressNonlinearCreep,
@@ -70,7 +73,8 @@ EXTENSIONS: dict[str, type[AbstractExtension]] = {
     )
 }
 """The candidate extensions of the diagnosis, id -> class, in a fixed order: creep
-changes first, then temperature, then the apparatus. ([`DiscoveredTerm`][], id
+changes first (Park's hardening of the instantaneous strain innermost), then
+temperature, then the apparatus. ([`DiscoveredTerm`][], id
 `discovered`, is not a catalogue candidate: the discovery builds its terms.)"""
 
 COVARIATE_EXTENSIONS: dict[str, type[AbstractExtension]] = {
