@@ -20,6 +20,7 @@ from .parsing import (
     metadata_value,
     parse_metadata,
     parse_rows,
+    row_cells,
 )
 from .preamble import merge, read_block
 from .sniff import (
@@ -31,7 +32,7 @@ from .sniff import (
 )
 from .testdata import TestData, mask_slack
 from .text import read_lines
-from .units import COLUMNS, IGNORE, accepted_names
+from .units import COLUMNS, IGNORE, QUANTITIES, accepted_names
 
 
 def _parse_columns_spec(
@@ -69,6 +70,19 @@ def _parse_columns_spec(
     return map_names(
         tokens, unknown=unknown, repeated=repeated, missing=missing, required=required
     )
+
+
+def _header_names(header: str, sep: str, columns: list[ColumnMap]) -> dict:
+    """Per quantity read, the name of its column in the `header` line."""
+    cells = [cell.strip() for cell in row_cells(header, sep)]
+    return {
+        c.quantity: cells[c.position - 1]
+        for c in columns
+        if c.quantity in QUANTITIES
+        and c.position is not None
+        and c.position <= len(cells)
+        and cells[c.position - 1]
+    }
 
 
 def read_test(
@@ -268,6 +282,11 @@ def read_test(
     notes = column_notes(column_map, named_by)
     column_map = derive_channels(column_map, metadata, path, header_line)
     data = assemble(path, column_map, values, line_numbers, metadata, header_line)
+    if header_line is not None:
+        # Errors about the data name the columns as the header does (`Load`).
+        data = dataclasses.replace(
+            data, column_names=_header_names(lines[header_line - 1], sep, column_map)
+        )
     if notes:
         data = dataclasses.replace(data, notes=notes)
     if detect_slack and np.all(np.isfinite(data.force)):
