@@ -158,7 +158,10 @@ def read_test(
     - *Slack* (`detect_slack`): stretches where the force is about zero while the
         crosshead moves are masked, and negative forces clipped to 0; see
         [`jaxcable.mask_slack`][] for the rule. The result is in `mask`,
-        `force_raw` and `slack_report`.
+        `force_raw` and `slack_report`. A reading below zero within the load
+        cell's noise (the slack threshold, from the file's own force noise) is
+        then a 0 N reading; one below minus the threshold is masked, and the
+        command line refuses it where the force drives the model.
 
     **Arguments:**
 
