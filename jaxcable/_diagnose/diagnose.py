@@ -30,6 +30,11 @@ named stages, each a function with a typed result:
    excess each explains;
 7. the rounds (`rounds.py`): after a cause is named, stages 1-6 again around the
    extended model, until nothing is left to name.
+
+The right family first (`family.py`): when the first round's base is far from the
+data before any candidate, the other base models are fitted on the same split;
+one clearly better held out (by the significance rule of a candidate) becomes the
+base of the rounds (`Diagnosis.family` says which and why).
 """
 
 import warnings
@@ -59,6 +64,7 @@ def diagnose(
     drive="auto",
     discover: bool | None = None,
     max_rounds: int = 3,
+    family: bool | None = None,
 ) -> Diagnosis:
     """Find what a model gets wrong on measured data and name the physical cause.
 
@@ -75,6 +81,14 @@ def diagnose(
     `MIN_EXPLAINED_PCT` %; the named cause is the sufficient significant candidate
     of largest held-out gain. Otherwise the verdict, and `named_cause`, is
     `"unexplained"`: every candidate keeps its `explained_pct`.
+
+    **The right family first.** When the base's held-out RMSE is at least
+    `FAMILY_EXCESS` = 10 x the noise and its residual systematic (lag-1
+    autocorrelation >= 0.5), the other base models (integrated, five-element,
+    Burgers, Bouc-Wen, Findley's power law) are fitted on the same split before any
+    candidate; one whose held-out RMSE is `MIN_GAIN_PCT` % lower with ΔBIC <= -10
+    (the best such) becomes the base of the rounds. `Diagnosis.family` gives each
+    family's held-out RMSE and BIC and the family chosen, with the reason.
 
     **Every cause in turn.** After a cause is named, the diagnosis looks again with
     the extended model as its base (the named effect's parameters free with the
@@ -145,6 +159,10 @@ def diagnose(
         never.
     - `max_rounds`: the most rounds (causes) to look for, >= 1 (1: stop after the
         first cause).
+    - `family`: compare the other base models (`jaxcable._diagnose.family`): None
+        (default) when the base is far from the data (held-out RMSE >=
+        `FAMILY_EXCESS` x the noise, residual systematic), True always, False
+        never.
 
     **Returns:**
 
@@ -157,6 +175,8 @@ def diagnose(
     [`jaxcable.fit`][] for bad data.
     """
     check_max_rounds(max_rounds)
+    if family is not None and not isinstance(family, bool):
+        raise ValueError(f"`family` must be None, True or False, got {family!r}.")
     meter = check_progress_meter(progress_meter, NoProgressMeter())
     model = _data_start(model, tests, drive, meter)
     options = dict(
@@ -168,6 +188,7 @@ def diagnose(
         max_steps=max_steps,
         key=key,
         discover=discover,
+        family=family,
     )
     with meter.bar("diagnosing"):
         return diagnose_rounds(

@@ -5,7 +5,7 @@ decide significance."""
 import dataclasses
 import json
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from .._drive import AbstractTestDrive, as_test_drive
 from .._files import write_text_atomic
@@ -22,6 +22,10 @@ from .verdict import (
     MIN_GAIN_PCT,
     MIN_SIZE_Z,
 )
+
+
+if TYPE_CHECKING:
+    from .family import FamilyCheck
 
 
 class _InMm:
@@ -189,6 +193,11 @@ class Diagnosis:
     - `note`: for a round whose cause was not kept: why.
     - `covariate`: the extra column the base reads (a covariate's extension named
         in an earlier round), or None.
+    - `family`: which family of base models the data want, checked in the first
+        round before any candidate when the base is far from the data
+        (`jaxcable._diagnose.family.FamilyCheck`: each family's held-out RMSE and
+        BIC, the family the rounds ran on and why), or None (a round after the
+        first).
     - `base_heldout_rmse_mm`, `base_train_rmse_mm`, `extended_heldout_rmse_mm`,
         `final_heldout_rmse_mm`, `noise_mm` (properties): the same in mm; NaN
         unless `unit` is mm.
@@ -223,6 +232,7 @@ class Diagnosis:
     final_fit: FitResult | None = dataclasses.field(
         default=None, repr=False, compare=False
     )
+    family: "FamilyCheck | None" = dataclasses.field(default=None, compare=False)
 
     base_heldout_rmse_mm = _InMm("base_heldout_rmse")
     final_heldout_rmse_mm = _InMm("final_heldout_rmse")
@@ -288,6 +298,7 @@ class Diagnosis:
             "discovered": jsonable(self.discovered),
             "structure": jsonable(self.structure),
             "tests": list(self.test_ids),
+            "family": None if self.family is None else self.family.to_dict(),
         }
 
     def round_dict(self) -> dict[str, Any]:

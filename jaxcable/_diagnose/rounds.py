@@ -19,6 +19,11 @@ fitted after a wrong partial cause absorbs what it got wrong). Otherwise they
 are reported as tried (`accepted` False) and the verdict stays what the rounds
 before them gave.
 
+The first round checks the base's family before any candidate
+(`jaxcable._diagnose.family`): when its base is far from the data, the other base
+models are fitted on the same split, and one clearly better held out becomes the
+base of every round.
+
 A round whose named cause leaves more than `MIN_EXCESS` x the noise runs the
 discovery as well when that cause reads none of the covariates the data record (an
 unused measured channel beside a residual above the noise is a lead: an extra
@@ -38,6 +43,7 @@ from .._progress import AbstractProgressMeter
 from .base import fit_base
 from .catalogue import score_catalogue
 from .covariates import covariate_candidates
+from .family import check_family
 from .library import base_start
 from .outcome import conclude, verdict
 from .plan import Plan, choose_candidates
@@ -76,11 +82,8 @@ class RoundBase:
     exclude: frozenset[str]
 
 
-def one_round(
-    tests, base: RoundBase, candidates, options: dict, meter
-) -> tuple[Diagnosis, Plan]:
-    """One pass of the stages around `base` (see `jaxcable._diagnose.diagnose`): its
-    diagnosis and plan."""
+def _base_stage(tests, base: RoundBase, candidates, options: dict, meter):
+    """`(plan, fitted base)` of a round around `base`."""
     ids = [*EXTENSIONS, *COVARIATE_EXTENSIONS] if candidates is None else candidates
     ids = [i for i in ids if i not in base.exclude]
     plan = choose_candidates(
@@ -94,21 +97,43 @@ def one_round(
         drive=options["drive"],
         covariate=base.covariate,
     )
-    max_steps = options["max_steps"]
     fitted = fit_base(
         plan,
         base.model,
         multistart=options["multistart"],
-        max_steps=max_steps,
+        max_steps=options["max_steps"],
         key=options["key"],
         progress_meter=meter,
     )
+    return plan, fitted
+
+
+def one_round(
+    tests, base: RoundBase, candidates, options: dict, meter, *, first: bool = False
+) -> tuple[Diagnosis, Plan, RoundBase]:
+    """One pass of the stages around `base` (see `jaxcable._diagnose.diagnose`): its
+    diagnosis, plan and base. The `first` round checks the base's family
+    ([`check_family`][]) before any candidate, and runs on the family the data
+    want (its base then that family's)."""
+    plan, fitted = _base_stage(tests, base, candidates, options, meter)
+    noise = noise_floor(plan.tests, plan.how, fitted)
+    family = None
+    if first:
+        family, start = check_family(
+            tests, plan, fitted, noise, base.model, options, meter
+        )
+        if start is not None:
+            base = dataclasses.replace(
+                base, model=start, label=type(start).__name__, names=None
+            )
+            plan, fitted = _base_stage(tests, base, candidates, options, meter)
+            noise = noise_floor(plan.tests, plan.how, fitted)
+    max_steps = options["max_steps"]
     found = score_catalogue(plan, base.model, fitted, progress_meter=meter)
     if plan.on_time_split_in_mm:
         found += covariate_candidates(
             plan, fitted, max_steps=max_steps, progress_meter=meter
         )
-    noise = noise_floor(plan.tests, plan.how)
     decision = verdict(fitted, noise, found)
     discovered = None
     auto = options["discover"] is None
@@ -124,7 +149,8 @@ def one_round(
             decision = verdict(fitted, noise, found)
             if unused:
                 decision = _named_unless_beaten(before, decision, found)
-    return conclude(plan, base.label, fitted, found, decision, noise, discovered), plan
+    d = conclude(plan, base.label, fitted, found, decision, noise, discovered)
+    return dataclasses.replace(d, family=family), plan, base
 
 
 def _discovery_may_beat(plan: Plan, base: RoundBase, found, decision: Verdict, noise):
@@ -230,7 +256,9 @@ def diagnose_rounds(
     for k in range(max_rounds):
         if k:
             progress_meter.say(f"round {k + 1}: base {base.label}")
-        d, plan = one_round(tests, base, candidates, options, progress_meter)
+        d, plan, base = one_round(
+            tests, base, candidates, options, progress_meter, first=not k
+        )
         plans.append(plan)
         cause = d.candidate(d.named_cause) if d.verdict == "named" else None
         partial = None

@@ -32,6 +32,8 @@ def summary(d) -> str:
         f"{d.base_heldout_rmse:.4g} {u} held out",
         "",
     ]
+    if d.family is not None:
+        lines += [d.family.describe(u), ""]
     rounds = d.rounds or (d,)
     for k, r in enumerate(rounds):
         if len(rounds) > 1:
