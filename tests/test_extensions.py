@@ -33,6 +33,7 @@ from .helpers import PARK_CABLE as CABLE, PARK_MODEL as BASE
 
 
 ORDER = (
+    "hardening",
     "hereditary",
     "second_retardation",
     "stress_nonlinear_creep",
@@ -67,6 +68,7 @@ def _simulate(model, cable=CABLE, time=TIME, force=FORCE):
 
 
 NULL = {
+    "hardening": lambda b: jc.Hardening(b, beta=0.0),
     "hereditary": lambda b: Hereditary(b, weight=0.0),
     "second_retardation": lambda b: SecondRetardation(b, E_k=jnp.inf, tau_k=50.0),
     "stress_nonlinear_creep": lambda b: StressNonlinearCreep(b, n=0.0),

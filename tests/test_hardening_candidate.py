@@ -69,7 +69,10 @@ def test_the_hardening_check_is_a_strain():
     # with neither limit (inf) only hardening fails, never the plain model.
     thin = jc.Cable.from_mm(length_mm=500.0, diameter_mm=0.23, breaking_load_N=200.0)
     unbounded = jc.Cable.from_mm(
-        length_mm=500.0, diameter_mm=0.23, breaking_strain=math.inf
+        length_mm=500.0,
+        diameter_mm=0.23,
+        breaking_load_N=200.0,
+        breaking_strain=math.inf,
     )
     ok, out = jc.RESULTS.successful, jc.RESULTS.parameter_out_of_domain
     assert jc.IntegratedModel().check(thin) == ok

@@ -38,8 +38,8 @@ class StartMovedWarning(UserWarning):
 # its largest value before it first falls by `_DROP` of the test's peak.
 _REACHED = 0.98
 _DROP = 0.05
-# The first loading is resampled to this many points: one compiled simulation
-# serves every test and every iterate.
+# The first loading is taken on this many samples (every k-th of a longer one,
+# padded): one compiled simulation serves every test and every iterate.
 _POINTS = 64
 # Secant iterations of the stiffness factor, and its range.
 _ITERATIONS = 4
@@ -168,17 +168,21 @@ def _longest_hold(time: np.ndarray, channel: np.ndarray) -> float:
 
 @dataclasses.dataclass(frozen=True)
 class _Loading:
-    """One test's first loading, resampled: time (s), force (N), the measured
-    strain, the cable (unbreakable, for the start's simulation)."""
+    """One test's first loading on `_POINTS` samples: time (s), force (N), the
+    measured strain, which samples count (False: padding), and the cable
+    (unbreakable, for the start's simulation)."""
 
     time: np.ndarray
     force: np.ndarray
     strain: np.ndarray
+    mask: np.ndarray
     cable: object
 
 
 def _loading(test) -> _Loading | None:
-    """The first loading of `test`, or None when it has none (no rise of force)."""
+    """The first loading of `test`, or None when it has none (no rise of force):
+    its own samples, every k-th of a longer one (no interpolation: for data of the
+    model itself the start's strain is the data's exactly), padded."""
     time = np.asarray(test.time, float)
     force = np.maximum(np.asarray(test.force, float), 0.0)
     cable = test.cable()
@@ -186,8 +190,13 @@ def _loading(test) -> _Loading | None:
     end = _first_loading(force)
     if not force[end] > 0:
         return None
-    grid = np.linspace(time[0], time[end], _POINTS)
-    f = np.interp(grid, time, force)
+    index = np.unique(np.round(np.linspace(0, end, min(end + 1, _POINTS))).astype(int))
+    pad = _POINTS - index.shape[0]
+    index = np.concatenate([index, np.full(pad, index[-1])])
+    mask = np.arange(_POINTS) < _POINTS - pad
+    # The padding samples leave the state as it is; their times still increase.
+    t = time[index] + np.maximum(np.arange(_POINTS) - (_POINTS - pad - 1), 0) * 1e-3
+    f = force[index]
     # The start's own strain, whatever it is: the scaling measures it. (A breaking
     # strain of 1 keeps Park's hardening in its domain; the load limit is the
     # cable's or twice the loading's peak.)
@@ -197,15 +206,20 @@ def _loading(test) -> _Loading | None:
         cable,
         (jnp.asarray(1.0), jnp.asarray(limit)),
     )
-    return _Loading(grid, f, np.interp(grid, time, strain), free)
+    return _Loading(t, f, strain[index], mask, free)
 
 
 def _strain_of(model, loading: _Loading) -> np.ndarray:
     """The start's strain over a first loading (NaN where it fails)."""
     traj = simulate_force_history(
-        model, loading.cable, loading.time, loading.force, throw=False
+        model,
+        loading.cable,
+        loading.time,
+        loading.force,
+        mask=loading.mask,
+        throw=False,
     )
-    return np.asarray(traj.strain, float)
+    return np.asarray(traj.strain, float)[loading.mask]
 
 
 def _factor(model, loadings: list[_Loading]) -> float:
@@ -213,7 +227,7 @@ def _factor(model, loadings: list[_Loading]) -> float:
     data's in the least-squares sense (geometric mean over the tests)."""
     logs = []
     for loading in loadings:
-        measured = loading.strain - loading.strain[0]
+        measured = (loading.strain - loading.strain[0])[loading.mask]
         log_c = 0.0
         for _ in range(_ITERATIONS):
             strain = _strain_of(_scaled(model, math.exp(log_c), 1.0), loading)
@@ -283,8 +297,8 @@ def scaled_start(model: AbstractCableModel, tests, *, drive="auto"):
     where the force first reaches 98 % of its largest value before it first falls
     (by 5 % of the test's peak force): a creep test's ramp, a cycle's first rise.
     The model is driven by that measured force (force-driven, whatever drives the
-    test: a relaxation's first loading is a force history too, resampled to 64
-    points) and a factor c is found that matches its strain rise to the measured
+    test: a relaxation's first loading is a force history too; at most 64 of its
+    samples, every k-th of a longer loading) and a factor c is found that matches its strain rise to the measured
     one in the least-squares sense, d ~ m / c (d, m the measured and the model's
     strain above the first sample): c <- c <m, m> / <m, d>, iterated 4 times for a
     nonlinear model, within [1e-4, 1e4], a start that does not load finitely made

@@ -51,6 +51,7 @@ from .synthetic import (
 
 # Each pair (inner, outer) and the multiple of each effect's detection limit.
 HIDDEN_PAIRS: dict[tuple[str, str], dict[str, float]] = {
+    ("hardening", "sensor_drift"): {"hardening": 4.0, "sensor_drift": 4.0},
     ("termination_compliance", "sensor_drift"): {
         "termination_compliance": 4.0,
         "sensor_drift": 4.0,

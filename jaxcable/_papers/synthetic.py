@@ -235,6 +235,9 @@ HIDDEN_EFFECT_DESIGN = (
 # (hereditary, stress_nonlinear_creep, temperature) need larger parameters than they
 # did on the linear dashpot for the same few um of elongation.
 HIDDEN_EFFECTS: dict[str, dict] = {
+    # Provisional (not yet swept by `benchmarks/diagnose_matrix.py`): Park's beta
+    # (gamma = 2) of a few um of elongation on these tests' 2-4 % strains.
+    "hardening": {"size": 10.0, "weaker": (5.0,), "test": 30.0, "fixed": {}},
     "hereditary": {"size": 0.05, "weaker": (0.03,), "test": 0.15, "fixed": {}},
     "second_retardation": {
         "size": 1.5e11,
