@@ -84,7 +84,8 @@ def _message(status, err):
     """The refusal's message: the last non-empty stderr line (the CLI prints the
     error last), or the status when stderr is empty."""
     lines = [line for line in err.splitlines() if line.strip()]
-    return lines[-1].strip() if lines else f"exit status {status}"
+    message = lines[-1].strip() if lines else f"exit status {status}"
+    return message.replace(f"{ROOT}/", "")
 
 
 def _finite(x):
@@ -211,7 +212,7 @@ def markdown(document):
     ]
     for o in document["outcomes"]:
         if o["error"] is not None:
-            verdict = f"refused: `{o['error'][:160]}`"
+            verdict = "refused: " + o["error"][:200].replace("`", "'").replace("|", "/")
             rmse = noise = causes = "-"
         else:
             verdict = o["verdict"]
