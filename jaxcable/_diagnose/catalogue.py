@@ -2,6 +2,7 @@
 ([`jaxcable.EXTENSIONS`][]) fitted around the base and scored like it."""
 
 from .._models import EXTENSIONS, AbstractCableModel
+from .._models.extensions.temperature import with_data_reference
 from .._progress import AbstractProgressMeter
 from .base import BaseFit
 from .plan import Plan
@@ -34,8 +35,11 @@ def score_catalogue(
         # extended model), then from the base fit when that fits the training data
         # worse than the base did. The candidates refit the base's fitted
         # parameters plus their own effect fields, never the extension's fixed ones.
-        starts = [stack.model(model, ext_id)] + [
-            stack.model(r.model, ext_id) for r in base.score.fits
+        # A time shift's reference at the data's median temperature: the base's
+        # time scales that are not refitted then belong to the data.
+        starts = [
+            with_data_reference(stack.model(m, ext_id), plan.tests)
+            for m in [model, *(r.model for r in base.score.fits)]
         ]
         scored = score_folds(
             plan.parts,

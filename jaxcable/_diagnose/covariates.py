@@ -10,11 +10,11 @@ import warnings
 
 import equinox as eqx
 import jax.numpy as jnp
-import numpy as np
 
 from .._drive import FORCE_DRIVEN
 from .._fit import IdentifiabilityWarning, fit
 from .._models import COVARIATE_EXTENSIONS
+from .._models.extensions.temperature import with_data_reference
 from .._progress import AbstractProgressMeter
 from .base import BaseFit
 from .discover import term_coefficient
@@ -49,7 +49,7 @@ def covariate_candidates(
     starts from the fitted base (per-test values averaged) with the form's start
     value: the regression coefficient of its library term (`LIBRARY_TERM`), else
     the value fitted alone on the fitted base (from `wrap`'s; a shift's `c_ref` at
-    the column's mean); then the base's fitted parameters are refitted with its
+    the column's median); then the base's fitted parameters are refitted with its
     own.
     """
     tests, ids, columns, how = plan.tests, plan.covariate_ids, plan.columns, plan.how
@@ -61,13 +61,11 @@ def covariate_candidates(
     train, held = plan.time_fold.train, [t.mask for t in plan.time_fold.held]
     out = []
     for column in columns:
-        record = np.concatenate([np.asarray(t.extra[column], float) for t in tests])
         for ext_id in ids:
             cls = COVARIATE_EXTENSIONS[ext_id]
-            start = cls.wrap(start_base)
-            if hasattr(start, "c_ref"):
-                mean = jnp.asarray(np.mean(record), jnp.result_type(start.c_ref))
-                start = eqx.tree_at(lambda m: m.c_ref, start, mean)
+            # A shift's reference at the column's median: the base is the
+            # material at that level, the shift carries only the contrast.
+            start = with_data_reference(cls.wrap(start_base), tests, column)
             progress_meter.say(f"fitting candidate {ext_id} ({column})")
             # As for the catalogue, identifiability is reported in the fit.
             with warnings.catch_warnings():

@@ -42,6 +42,20 @@ class _InMm:
         return getattr(obj, self.name) if obj.unit == "mm" else math.nan
 
 
+def shift_reference(model) -> dict[str, Any]:
+    """The reference of the outermost time shift `model` is (its `T_ref`, K, or
+    `c_ref`): `{"field", "value", "unit"}` (and `"celsius"` for a temperature);
+    empty when `model` is no shift."""
+    for field, unit in (("T_ref", "K"), ("c_ref", "[c]")):
+        value = getattr(model, field, None)
+        if value is not None and hasattr(model, "log_shift_at"):
+            out = {"field": field, "value": float(value), "unit": unit}
+            if field == "T_ref":
+                out["celsius"] = float(value) - 273.15
+            return out
+    return {}
+
+
 @dataclasses.dataclass(frozen=True)
 class Candidate:
     """One candidate extension, fitted and scored.
@@ -99,6 +113,14 @@ class Candidate:
     heldout_rmse_mm = _InMm("heldout_rmse")
     train_rmse_mm = _InMm("train_rmse")
 
+    @property
+    def reference(self) -> dict[str, Any]:
+        """The reference of a time shift's fit (a = 1 there: its base is the
+        material at it): `{"field", "value", "unit"}` (`T_ref` in K with `"celsius"`
+        beside it; a covariate shift's `c_ref` in its column's unit); empty for
+        any other candidate."""
+        return shift_reference(None if self.fit is None else self.fit.model)
+
     @classmethod
     def not_applicable(
         cls, id: str, extension: type, note: str, unit: str = "mm"
@@ -128,6 +150,7 @@ class Candidate:
         out.pop("fit")
         out["heldout_rmse_mm"] = self.heldout_rmse_mm
         out["train_rmse_mm"] = self.train_rmse_mm
+        out["reference"] = self.reference
         return {k: jsonable(v) for k, v in out.items()}
 
 
@@ -152,8 +175,14 @@ class Diagnosis:
     - `structure`: the base residuals' structure: `{feature: correlation}` (the
         test conditions and every covariate with its rate and absolute rate) and
         the lag-1 autocorrelation with its white-noise band (`residual_structure`).
-    - `noise`: the noise of the scored channels estimated from the data (robust,
-        from second differences), in `unit`.
+    - `noise`: the noise of the scored channels estimated from the data, in `unit`:
+        robust, from second differences, unless the record is smooth (filtered,
+        interpolated, digitised, processed), where a floor replaces them: the
+        record's quantisation step / sqrt(12) or the white part of the base
+        residual (the rule: `jaxcable._diagnose.noise`, docs/diagnosis.md).
+    - `noise_source`: which estimate `noise` is and why, in words ("second
+        differences", "quantisation step 0.01 mm (step / sqrt(12))", "white part of
+        the base residual (record smooth: second differences 40x below)").
     - `split`: how held-out data were chosen.
     - `holdout`: the held-out fraction of every test for the time split, None for
         cross-validation by tests.
@@ -233,6 +262,14 @@ class Diagnosis:
         default=None, repr=False, compare=False
     )
     family: "FamilyCheck | None" = dataclasses.field(default=None, compare=False)
+    noise_source: str = ""
+
+    def __post_init__(self):
+        # The estimate carries its source (a `jaxcable._diagnose.noise.Noise`):
+        # every round's diagnosis says where its noise came from.
+        if not self.noise_source:
+            source = getattr(self.noise, "source", "second differences")
+            object.__setattr__(self, "noise_source", source)
 
     base_heldout_rmse_mm = _InMm("base_heldout_rmse")
     final_heldout_rmse_mm = _InMm("final_heldout_rmse")
@@ -277,6 +314,7 @@ class Diagnosis:
             "base_train_rmse": jsonable(self.base_train_rmse),
             "extended_heldout_rmse": jsonable(self.extended_heldout_rmse),
             "noise": jsonable(self.noise),
+            "noise_source": self.noise_source,
             "drives": [as_test_drive(d).name for d in self.drives],
             "split": self.split,
             "thresholds": {
@@ -315,6 +353,7 @@ class Diagnosis:
             "gain_pct": jsonable(self.gain_pct),
             "effect": {k: jsonable(v) for k, v in self.effect.items()},
             "noise": jsonable(self.noise),
+            "noise_source": self.noise_source,
             "discovered": jsonable(self.discovered),
             "candidates": [c.to_dict() for c in self.candidates],
         }

@@ -2,7 +2,8 @@
 channel (one vmapped simulation, every sample, masked ones too), the units a
 diagnosis scores in (each test's drive, fixed once on the whole tests, and its
 residual unit: the `scale` of [`jaxcable.residuals`][]), the pooled RMSE of
-residuals over held-out or training samples, the noise estimated from the data, BIC,
+residuals over held-out or training samples, the noise estimated from the data
+(`jaxcable._diagnose.noise`, re-exported here), BIC,
 and the significance of a fitted candidate.
 
 Every test scored in its elongation (all force-driven): m, reported in mm. Every test
@@ -28,6 +29,12 @@ from .._fit import (
 from .._io import ControlDetection, TestData
 from .._models import AbstractCableModel
 from .heldout import Fold, time_split
+from .noise import (
+    Noise as Noise,
+    channel_noise as channel_noise,
+    noise_floor as noise_floor,
+    noise_level as noise_level,
+)
 from .result import MAX_DELTA_BIC, MIN_GAIN_PCT, MIN_SIZE_Z, Candidate
 
 
@@ -329,41 +336,6 @@ def score_folds(
         int(sum(int(np.asarray(m, bool).sum()) for m in train_masks)),
         results,
     )
-
-
-def channel_noise(test, drive) -> float | None:
-    """A robust estimate of the noise of a test's scored channel (m or N): the median
-    absolute second difference, / 0.6745 / sqrt(6) (for white noise the second
-    difference has variance 6 sigma^2; the signal's own curvature between dense
-    samples is far smaller and the median ignores the reversals); None for fewer
-    than 5 samples."""
-    x = measured_channel(test, drive)
-    if x.size < 5:
-        return None
-    return float(np.median(np.abs(np.diff(x, 2))) / 0.6745 / math.sqrt(6.0))
-
-
-def noise_floor(tests, scoring: Scoring) -> float:
-    """The noise of the scored channels estimated from the data, in the reported
-    unit: the median over tests of [`channel_noise`][] / the test's residual unit
-    (mm, N, or about 1 in noise units)."""
-    values = [
-        noise / s
-        for t, d, s in zip(as_test_list(tests), scoring.drives, scoring.scales)
-        if (noise := channel_noise(t, d)) is not None
-    ]
-    return scoring.factor * float(np.median(values)) if values else float("nan")
-
-
-def noise_level(tests) -> float:
-    """A robust estimate of the elongation noise, m: [`channel_noise`][] of each
-    test's elongation, the median over tests."""
-    values = [
-        noise
-        for t in as_test_list(tests)
-        if (noise := channel_noise(t, FORCE_DRIVEN)) is not None
-    ]
-    return float(np.median(values)) if values else float("nan")
 
 
 def bic(rmse: float, n: int, p: int, per_unit: float) -> float:

@@ -30,6 +30,7 @@ def summary(d) -> str:
         f"noise (estimated from the data) {noise}; base "
         f"RMSE {d.base_train_rmse:.4g} {u} fitted, "
         f"{d.base_heldout_rmse:.4g} {u} held out",
+        f"noise from: {d.noise_source or 'second differences'}",
         "",
     ]
     if d.family is not None:
@@ -76,11 +77,32 @@ def _table(r) -> list[str]:
             f"{c.delta_bic:>10.1f}{c.size:>12.4g}{c.size_stderr:>10.2g}  "
             f"{c.size_unit}{mark}"
         )
+    lines += _references(r)
     if r.discovered:
         cov = r.discovered.get("covariate")
         covariate = f" (covariate {cov})" if cov else ""
         lines.append(f"discovered term{covariate}: {r.discovered['equation']}")
     return lines
+
+
+def _references(r) -> list[str]:
+    """Where each fitted time shift of round `r` takes its reference: the base
+    beside it is the material there."""
+    out = []
+    for c in r.candidates:
+        ref = c.reference if c.applicable and not c.diverging else {}
+        if not ref:
+            continue
+        if ref["field"] == "T_ref":
+            at = f"{ref['celsius']:.1f} °C"
+            where = "the tests' median temperature"
+        else:
+            at = f"{ref['value']:.4g} in the unit of {c.covariate!r}"
+            where = f"the median of {c.covariate!r}"
+        out.append(
+            f"{c.id}: reference {at} ({where}): its base is the material at {at}"
+        )
+    return out
 
 
 def _round_lines(r, k: int, count: int) -> list[str]:

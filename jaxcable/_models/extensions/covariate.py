@@ -47,7 +47,8 @@ class CovariateStrain(AbstractExtension[CovariateStrainState]):
 
     with c = `cable.covariate` at each sample (the unit of its column) and c_0 its
     value at the test's first sample, so that the measured elongation, zeroed at the
-    start, starts at the base's. Swelling with moisture (alpha > 0) or thermal
+    start, starts at the base's. (c_0 is the data's own, per test: nothing of the
+    base is measured against it, so unlike a shift's reference it needs no choice.) Swelling with moisture (alpha > 0) or thermal
     expansion read at a second thermocouple (alpha < 0 for UHMWPE along the fibre).
     `alpha = 0` is the base exactly.
 
@@ -176,7 +177,9 @@ class CovariateShift(AbstractTimeShift):
     - `base`: the wrapped model.
     - `k`: the shift per unit of the covariate, decades per [c] (finite, either
         sign).
-    - `c_ref`: the covariate at which a = 1, [c] (e.g. the mean of the records).
+    - `c_ref`: the covariate at which a = 1, [c]: the base's parameters are the
+        material's at c_ref. [`jaxcable.diagnose`][] takes it at the median of the
+        column's records ([`jaxcable.with_data_reference`][]); 0 by default.
 
     `wrap(base)` starts a fit at `k = 1e-3` per unit, `c_ref = 0`.
     """

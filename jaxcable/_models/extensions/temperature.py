@@ -63,8 +63,92 @@ def reduced_time(
 
 def reference_temperature():
     """The field `T_ref` of a temperature shift: the reference temperature, K (> 0;
-    default 293.15 K, the default `Cable.temperature`), at which a_T = 1."""
+    default 293.15 K, the default `Cable.temperature`), at which a_T = 1. A
+    diagnosis sets it to the data's median temperature
+    ([`jaxcable.with_data_reference`][])."""
     return setting(293.15, unit="K")
+
+
+def median_temperature(tests) -> float | None:
+    """The median of every sample of the tests' temperature records, K; None when a
+    test records none (or a record is not finite)."""
+    records = [getattr(t, "temperature", None) for t in tests]
+    if not records or any(r is None for r in records):
+        return None
+    values = np.concatenate([np.asarray(r, float).ravel() for r in records])
+    if values.size == 0 or not np.all(np.isfinite(values)):
+        return None
+    # TestData records °C.
+    return float(np.median(values)) + 273.15
+
+
+def median_covariate(tests, column: str | None) -> float | None:
+    """The median of every sample of the extra column `column` of the tests, in the
+    column's unit; None when `column` is None or a test lacks it."""
+    if column is None:
+        return None
+    records = [(getattr(t, "extra", None) or {}).get(column) for t in tests]
+    if not records or any(r is None for r in records):
+        return None
+    values = np.concatenate([np.asarray(r, float).ravel() for r in records])
+    finite = values[np.isfinite(values)]
+    return float(np.median(finite)) if finite.size else None
+
+
+def with_data_reference(model, tests, covariate: str | None = None):
+    """`model` with the reference of every time shift in it at the median of the
+    data: `T_ref` of each temperature shift ([`jaxcable.TemperatureShift`][],
+    [`jaxcable.TemperatureShiftWLF`][]) at the tests' median temperature, `c_ref`
+    of each [`jaxcable.CovariateShift`][] at the median of the column `covariate`.
+
+    A shift scales every time-dependent process of its base by a(T) with a(T_ref) =
+    1, and only some of the base's time scales are refitted (Park's `t_r1`, `t_e`;
+    not `eta0`, `t_c` or the Eq. 8 lambdas): away from the data's temperatures
+    the unfitted ones stay at the start's values, off by a(T_data) for the whole
+    data (1.28 for 60 kJ/mol at 23 °C against the default 20 °C). At the data's
+    median the base, fitted beside the shift, is the material at that
+    temperature, and a(T) carries only the contrast between the tests.
+
+    **Arguments:**
+
+    - `model`: any model; the extension layers are found through their `base`.
+    - `tests`: the tests ([`jaxcable.TestData`][]; temperature records in °C).
+    - `covariate`: the extra column a [`jaxcable.CovariateShift`][] reads (None:
+        its `c_ref` is left as it is).
+
+    **Returns:**
+
+    The model, every shift's reference at the data's median; unchanged where the
+    data record no temperature (or not the column).
+    """
+    temperature = median_temperature(tests)
+    level = median_covariate(tests, covariate)
+
+    def at(m):
+        if isinstance(m, AbstractTemperatureShift) and temperature is not None:
+            m = _set(m, "T_ref", temperature)
+        # A covariate's shift (`CovariateShift`, in covariate.py, which imports
+        # this module) is the time shift with a `c_ref`.
+        if (
+            isinstance(m, AbstractTimeShift)
+            and hasattr(m, "c_ref")
+            and level is not None
+        ):
+            m = _set(m, "c_ref", level)
+        inner = getattr(m, "base", None)
+        if isinstance(inner, eqx.Module):
+            m = eqx.tree_at(lambda x: x.base, m, at(inner))
+        return m
+
+    return at(model)
+
+
+def _set(model, name: str, value: float):
+    """`model` with its field `name` at `value`, in the field's dtype."""
+    old = getattr(model, name)
+    return eqx.tree_at(
+        lambda m: getattr(m, name), model, jnp.asarray(value, jnp.result_type(old))
+    )
 
 
 class AbstractTimeShift(AbstractExtension[PyTree]):
@@ -153,7 +237,9 @@ class TemperatureShift(AbstractTemperatureShift):
     - `base`: the wrapped model.
     - `activation_energy`: E_a, J/mol (>= 0).
     - `T_ref`: the reference temperature, K (> 0; default 293.15 K, the default
-        `Cable.temperature`), at which a_T = 1.
+        `Cable.temperature`), at which a_T = 1: the base's parameters are the
+        material's at T_ref. [`jaxcable.diagnose`][] takes it at the data's
+        median temperature ([`jaxcable.with_data_reference`][]).
 
     `wrap(base)` starts a fit at `activation_energy = 1e4 J/mol` (a_T ~ 0.87 at 10 K
     above T_ref; thermally activated creep of UHMWPE is ~ 1e5 J/mol).
@@ -208,7 +294,8 @@ class TemperatureShiftWLF(AbstractTemperatureShift):
     - `base`: the wrapped model.
     - `c1`: C1, dimensionless (>= 0).
     - `c2`: C2, K (> 0; C2 + T - T_ref must stay > 0).
-    - `T_ref`: the reference temperature, K (> 0; default 293.15 K).
+    - `T_ref`: the reference temperature, K (> 0; default 293.15 K), at which
+        a_T = 1 (see [`jaxcable.TemperatureShift`][]).
 
     `wrap(base)` starts a fit at the "universal" C2 = 51.6 K and a small C1 = 1.
     """
