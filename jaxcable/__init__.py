@@ -99,6 +99,9 @@ from ._models import (
     log_shift_wlf as log_shift_wlf,
     piao_five_element as piao_five_element,
 )
+from ._models.extensions.temperature import (
+    with_data_reference as with_data_reference,
+)
 from ._montecarlo import (
     AbstractDistribution as AbstractDistribution,
     AbstractParameterSampler as AbstractParameterSampler,
