@@ -433,7 +433,13 @@ def test_bad_tests_raise_value_error():
     backwards = dataclasses.replace(good, time=good.time[::-1].copy())
     with pytest.raises(ValueError, match=r"tests\[0\].*time"):
         jc.pad_tests([backwards])
-    overload = dataclasses.replace(good, force=good.force * 100)
+    # Above the breaking load its file gives (without one, a test's own peak
+    # force is no limit: jaxcable.TestData.cable).
+    overload = dataclasses.replace(
+        good,
+        force=good.force * 100,
+        metadata={**good.metadata, "breaking_load_N": 2000.0},
+    )
     with pytest.raises(ValueError, match="breaking load"):
         jc.pad_tests([overload])
     with pytest.raises(ValueError, match="PaddedTests"):
