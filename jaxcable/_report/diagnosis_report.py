@@ -138,10 +138,36 @@ def _candidate_table(diagnosis: Diagnosis) -> list[str]:
     return table
 
 
+def _notes(diagnosis: Diagnosis) -> list[str]:
+    """What the numbers are measured against: the noise and where it comes from,
+    and the reference of every fitted time shift (its base is the material
+    there)."""
+    u = diagnosis.unit
+    noise = (
+        f"{diagnosis.noise * 1e3:.3g} um" if u == "mm" else f"{diagnosis.noise:.3g} {u}"
+    )
+    lines = [f"- Noise: {noise}, from the {diagnosis.noise_source}."]
+    named = set(diagnosis.causes) | {diagnosis.named_cause}
+    for c in diagnosis.candidates:
+        ref = c.reference if c.applicable else {}
+        if not ref:
+            continue
+        if ref["field"] == "T_ref":
+            at, where = f"{ref['celsius']:.1f} °C", "the tests' median temperature"
+        else:
+            at, where = f"{ref['value']:.4g}", f"the median of {c.covariate!r}"
+        whose = "the named model's base" if c.id in named else "its base"
+        lines.append(
+            f"- {c.id}: reference at {at} ({where}): {whose} is the material at {at}."
+        )
+    return lines
+
+
 def write_diagnosis_report(out, diagnosis: Diagnosis, tests) -> list[pathlib.Path]:
     """Write the diagnosis report to the folder `out` (created if needed).
 
-    Files: `diagnosis.json` ([`jaxcable.Diagnosis.to_json`][]), `summary.md`,
+    Files: `diagnosis.json` ([`jaxcable.Diagnosis.to_json`][]), `summary.md` (the
+    summary, the noise and where it comes from, each time shift's reference),
     `residuals.png` (model minus measured value of each test's scored channel vs
     time, in the diagnosis's unit, base and the named extension, before/after,
     held-out part shaded), `candidates.png` (held-out gain
@@ -176,6 +202,8 @@ def write_diagnosis_report(out, diagnosis: Diagnosis, tests) -> list[pathlib.Pat
         "# jaxcable diagnose\n\n```\n"
         + diagnosis.summary()
         + "\n```\n\n"
+        + "\n".join(_notes(diagnosis))
+        + "\n\n"
         + "\n".join(_candidate_table(diagnosis))
         + "\n\n![residuals](residuals.png)\n![candidates](candidates.png)\n"
         + "![structure](structure.png)\n![rounds](rounds.png)\n",
