@@ -238,7 +238,10 @@ def test_noise(test, drive, residual=None, unit=("mm", 1e3)):
             (sig.step / math.sqrt(12.0), f"quantisation step {step} (step / sqrt(12))")
         )
     if rms is not None:
-        below = f"second differences {ratio:.3g}x below" if ratio > 1 else why
+        # "40x below" says it in one number; zero second differences say why.
+        below = (
+            f"second differences {ratio:.3g}x below" if 1 < ratio < math.inf else why
+        )
         floors.append(
             (rms, f"white part of the base residual (record smooth: {below})")
         )
