@@ -43,7 +43,8 @@ _OUTCOMES = (
 
 def _param(record):
     recorded = _OUTCOMES.get(record["id"])
-    marks = [pytest.mark.slow, pytest.mark.xdist_group("tests/test_real_records.py")]
+    # One xdist group (the file, tests/conftest.py): the records share compiled programs.
+    marks = [pytest.mark.slow]
     if recorded is not None and recorded["error"] is not None:
         reason = f"recorded refusal: {recorded['error']}"
         marks.append(pytest.mark.xfail(reason=reason, strict=False))
