@@ -68,6 +68,9 @@ def data_options(args) -> dict:
         rate_mm_per_min=args.rate_mm_per_min,
         breaking_strain=args.breaking_strain,
         detect_slack=not args.no_slack,
+        force_sign=args.force_sign,
+        tare=not args.no_tare,
+        frequency_hz=args.frequency_hz,
     )
 
 
@@ -77,10 +80,17 @@ def read_data(path, options: dict, *, require_force: bool = True) -> TestData:
     stops the search for slack stretches): a reading within the load cell's noise
     below zero is 0 N, the tolerance being the slack threshold, max(0.5 % of the
     peak force, 3 x the force noise estimated from the file's own second
-    differences), at most 5 % of the peak. A file without a force column (with
+    differences), at most 5 % of the peak. Before that, a load cell that reads
+    tension as negative is read with its sign flipped, and an offset at rest is
+    removed, where the file shows them (`force_sign="auto"`, `tare=True` unless the
+    options say otherwise; each said in the test's notes). A file without a force column (with
     `require_force=False`, an elongation history) is read as written."""
     options = dict(options)
     stretches = options.pop("detect_slack", True)
+    # The load cell's sign and offset at rest, corrected where the file shows them
+    # (`jaxcable._io.loadcell`), by every command alike.
+    options.setdefault("force_sign", "auto")
+    options.setdefault("tare", True)
     data = read_located(
         read_test, path, detect_slack=False, require_force=require_force, **options
     )

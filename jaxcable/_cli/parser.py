@@ -64,8 +64,37 @@ def _add_data_options(parser) -> None:
         metavar="NAMES",
         help="the files' columns in order with their units, e.g. "
         "time_s,elongation_mm,force_N (also time_ms, time_min, time_h, force_kN, "
-        "elongation_m, temperature_C; '-' for a column to ignore); default: from "
-        "the header",
+        "elongation_m, temperature_C; '-' for a column to ignore), or some of them "
+        "by their header names, e.g. Load=force_kN,Cycles=cycles (the others not "
+        "read); also stress_MPa, stress_kPa, stress_Pa (force = stress x the area "
+        "of --diameter-mm), strain, strain_percent (elongation = strain x "
+        "--length-mm), stretch_ratio (elongation = (ratio - 1) x "
+        "--length-mm), cycles (a cycle count: time = N / --frequency-hz, each burst "
+        "of samples at one count read as its mean); default: from the header",
+    )
+    raw.add_argument(
+        "--frequency-hz",
+        type=_positive_float,
+        metavar="F",
+        help="the test frequency, Hz, of files whose time is a cycle count "
+        "('cycles' in --columns)",
+    )
+    raw.add_argument(
+        "--force-sign",
+        choices=("auto", "+1", "-1"),
+        default="auto",
+        help="the sign of the files' force: +1 as written, -1 flipped, auto "
+        "(default) flipped where the load cell reads tension as negative (the force "
+        "mostly negative and growing in magnitude as the elongation grows; a "
+        "compression test, force and elongation both negative, is read as written)",
+    )
+    raw.add_argument(
+        "--no-tare",
+        action="store_true",
+        help="keep a load cell's offset at rest (by default, the force of the first "
+        "samples, before the elongation moves, is removed where it is clearly an "
+        "offset: a reading below zero at rest, or one the test loads above and "
+        "unloads below without ever reading zero; a preload is kept)",
     )
     raw.add_argument(
         "--skip-rows",

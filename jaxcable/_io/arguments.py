@@ -139,15 +139,42 @@ def derive_channels(
                     "(--columns) naming a force column."
                 )
             column = column._replace(quantity="force", to_si=column.to_si * area)
-        elif column.quantity == "strain":
+        elif column.quantity in ("strain", "stretch"):
             length = metadata.get("length_mm")
             if length is None:
                 column = column._replace(quantity=IGNORE)  # assemble asks for it
             else:
+                # A stretch ratio lambda is the strain lambda - 1.
+                offset = -1.0 if column.quantity == "stretch" else 0.0
                 to_m = column.to_si * float(length) * 1e-3
-                column = column._replace(quantity="elongation", to_si=to_m)
+                column = column._replace(
+                    quantity="elongation", to_si=to_m, offset=offset
+                )
         out.append(column)
     return out
+
+
+def derived_notes(columns: list[ColumnMap], metadata: dict) -> tuple[str, ...]:
+    """One line per channel of a `columns` value read from another quantity (a
+    stress, strain or stretch column; `columns` before `derive_channels`), saying
+    how it was read."""
+    notes = []
+    for column in columns:
+        if column.quantity == "stress" and metadata.get("diameter_mm") is not None:
+            area = _area_mm2(metadata)
+            notes.append(
+                f"force = the stress '{column.name}' x the area of a "
+                f"{float(metadata['diameter_mm']):g} mm circle ({area:.6g} mm^2): "
+                "a stress record is read with any consistent area (the model works "
+                "in force over the cable's area)"
+            )
+        elif column.quantity in ("strain", "stretch") and "length_mm" in metadata:
+            how = "(lambda - 1)" if column.quantity == "stretch" else "the strain"
+            notes.append(
+                f"elongation = {how} of '{column.name}' x length_mm "
+                f"({float(metadata['length_mm']):g} mm)"
+            )
+    return tuple(notes)
 
 
 def column_notes(columns: list[ColumnMap], named_by: str) -> tuple[str, ...]:

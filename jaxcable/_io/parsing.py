@@ -101,6 +101,9 @@ class ColumnMap(NamedTuple):
     quantity: str | None  # canonical quantity, None for an extra column, or IGNORE
     to_si: float
     position: int | None = None  # 1-based, shown in error messages when set
+    # Added to the file's value before `to_si`: a stretch ratio (lambda) is the
+    # elongation (lambda - 1) L0.
+    offset: float = 0.0
 
 
 def map_names(
@@ -401,7 +404,7 @@ def _to_si(values, line_numbers, column: ColumnMap, path) -> np.ndarray:
     """A column in SI units, checked finite: a value near the largest float may
     overflow (`1e306` h is `inf` s)."""
     with np.errstate(over="ignore"):
-        converted = values * column.to_si
+        converted = (values + column.offset) * column.to_si
     bad = np.flatnonzero(~np.isfinite(converted))
     if bad.size:
         i = int(bad[0])

@@ -10,13 +10,17 @@ import numpy as np
 from .arguments import (
     check_flag,
     check_read_arguments,
+    check_threshold,
     column_notes,
     derive_channels,
+    derived_notes,
 )
+from .columns import columns_by_name, parse_columns_spec
+from .cycles import cycles_to_time
+from .loadcell import check_force_sign, correct_load_cell
 from .parsing import (
     ColumnMap,
     assemble,
-    map_names,
     metadata_value,
     parse_metadata,
     parse_rows,
@@ -32,44 +36,7 @@ from .sniff import (
 )
 from .testdata import TestData, mask_slack
 from .text import read_lines
-from .units import COLUMNS, IGNORE, QUANTITIES, accepted_names
-
-
-def _parse_columns_spec(
-    columns: str | Sequence[str], path, required: tuple[str, ...]
-) -> list[ColumnMap]:
-    """The column map named by `columns` (`"time_s,elongation_mm,force_N,-"`)."""
-    tokens = (
-        [t.strip() for t in columns.split(",")]
-        if isinstance(columns, str)
-        else [str(t).strip() for t in columns]
-    )
-    shown = ",".join(tokens)
-    accepted = ", ".join(COLUMNS)
-
-    def unknown(position: int, token: str) -> ColumnMap:
-        if token == IGNORE:
-            return ColumnMap(IGNORE, IGNORE, 1.0, position)
-        raise ValueError(
-            f"{path}: columns '{shown}': column {position} '{token}' is not a "
-            f"column name (accepted: {accepted}, or '-' to ignore a column)."
-        )
-
-    def repeated(token: str, quantity: str, first: str) -> str:
-        return (
-            f"{path}: columns '{shown}': '{token}' is a second {quantity} "
-            f"column (the first is '{first}')."
-        )
-
-    def missing(quantity: str) -> str:
-        return (
-            f"{path}: columns '{shown}' names no {quantity} column "
-            f"({accepted_names(quantity)})."
-        )
-
-    return map_names(
-        tokens, unknown=unknown, repeated=repeated, missing=missing, required=required
-    )
+from .units import QUANTITIES
 
 
 def _header_names(header: str, sep: str, columns: list[ColumnMap]) -> dict:
@@ -102,6 +69,9 @@ def read_test(
     detect_slack: bool = True,
     slack_threshold_N: float | None = None,
     require_force: bool = True,
+    force_sign: int | str = 1,
+    tare: bool = False,
+    frequency_hz: float | None = None,
 ) -> TestData:
     """Read one test from a canonical CSV file or a raw tensile-tester export.
 
@@ -229,6 +199,11 @@ def read_test(
         slack_threshold_N,
     )
     check_flag(require_force, "require_force")
+    check_flag(tare, "tare")
+    force_sign = check_force_sign(force_sign)
+    check_threshold(frequency_hz, "frequency_hz")
+    if frequency_hz is not None and not frequency_hz > 0:
+        raise ValueError(f"`frequency_hz` must be positive, got {frequency_hz!r}.")
     required = ("time", "force") if require_force else ("time",)
     lines = read_lines(path, encoding)
     metadata, first = parse_metadata(lines, path)
@@ -251,9 +226,15 @@ def read_test(
             )
         sep = delimiter
         decimal_comma = sep != "," and sniff_separator(lines, first) == (sep, True)
-    spec = None if columns is None else _parse_columns_spec(columns, path, required)
+    spec = None if columns is None else parse_columns_spec(columns, path, required)
+    by_name, search = None, first
+    if isinstance(spec, dict):
+        # Columns named by their header names: the header is the row holding them,
+        # the data below it.
+        by_name = columns_by_name(lines, first, sep, spec, path)
+        spec, search = by_name[0], by_name[1]
     if skip_rows is None:
-        start = find_data_start(lines, first, sep, decimal_comma, spec, path)
+        start = find_data_start(lines, search, sep, decimal_comma, spec, path)
     else:
         if isinstance(skip_rows, bool) or not isinstance(skip_rows, int | np.integer):
             raise ValueError(
@@ -265,7 +246,12 @@ def read_test(
                 "lines."
             )
         start = int(skip_rows)
-    if spec is None:
+    if by_name is not None:
+        column_map, header_line = by_name
+        named_by = "the header"
+        if skip_rows is None:
+            start = data_below_header(lines, header_line, start, sep)
+    elif spec is None:
         column_map, header_line = header_columns(
             lines, first, start, sep, path, required
         )
@@ -282,7 +268,12 @@ def read_test(
     values, line_numbers = parse_rows(
         lines, start, column_map, path, sep, decimal_comma, named_by
     )
-    notes = column_notes(column_map, named_by)
+    values, line_numbers, column_map, timed = cycles_to_time(
+        values, line_numbers, column_map, frequency_hz, path
+    )
+    notes = column_notes(column_map, named_by) if by_name is None else ()
+    notes += derived_notes(column_map, metadata) if spec is not None else ()
+    notes += timed
     column_map = derive_channels(column_map, metadata, path, header_line)
     data = assemble(path, column_map, values, line_numbers, metadata, header_line)
     if header_line is not None:
@@ -292,6 +283,7 @@ def read_test(
         )
     if notes:
         data = dataclasses.replace(data, notes=notes)
+    data = correct_load_cell(data, force_sign, tare)
     if detect_slack and np.all(np.isfinite(data.force)):
         data = mask_slack(data, threshold_N=slack_threshold_N)
     return data

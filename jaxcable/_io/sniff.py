@@ -21,7 +21,8 @@ _SEPARATORS = {",": "comma", ";": "semicolon", "\t": "tab"}
 _COLUMNS_HINT = (
     "pass columns=... (--columns on the command line) naming the file's columns in "
     "order with their units, e.g. 'time_s,elongation_mm,force_N' ('-' for a column "
-    "to ignore)"
+    "to ignore), or some of them by their header names, e.g. "
+    "'Load=force_kN,Time=time_s' (the others not read)"
 )
 _QUANTITY_UNITS = {unit for _, unit in HEADER_UNITS}
 # The brackets of `Name (unit)`, `Name [unit]`, also full-width.
@@ -322,7 +323,7 @@ def header_columns(
     reasons = []
     for k in range(len(rows) - 1, -1, -1):
         index, names = rows[k]
-        if index in unit_rows:
+        if index in unit_rows or _mostly_numbers(names):
             continue
         below = [cells for i, cells in rows[k + 1 :] if i in unit_rows]
         columns, why = _match_header(names, below[0] if below else None)
@@ -335,6 +336,15 @@ def header_columns(
         f"{_SEPARATORS[sep]}-separated header{f' ({why})' if why else ''}; "
         f"{_COLUMNS_HINT}."
     )
+
+
+def _mostly_numbers(cells: list[str]) -> bool:
+    """Whether most filled cells of a row are numbers: a data row that carries a
+    label (CCFatigue writes the specimen's name in the first data row only), never
+    a header."""
+    filled = [cell for cell in cells if cell.strip()]
+    numbers = sum(_is_number(cell, False) for cell in filled)
+    return bool(filled) and numbers > len(filled) / 2
 
 
 def _is_content(text: str) -> bool:

@@ -35,6 +35,28 @@ COLUMNS: dict[str, Unit] = {
     "temperature_C": Unit("temperature", 1.0),
 }
 QUANTITIES = ("time", "force", "elongation", "temperature")
+# Names `columns` (`--columns`) also accepts, for columns that hold another quantity
+# from which a canonical one follows (never a canonical file's header): a stress
+# (factor to MPa; the force is the stress x the area of a circle of `diameter_mm`),
+# a strain (factor to mm/mm; the elongation is the strain x `length_mm`), a stretch
+# ratio lambda (the elongation is (lambda - 1) x `length_mm`), a cycle count (the
+# time follows from the test frequency, `frequency_hz`).
+DERIVED_COLUMNS: dict[str, Unit] = {
+    "stress_MPa": Unit("stress", 1.0),
+    "stress_kPa": Unit("stress", 1e-3),
+    "stress_Pa": Unit("stress", 1e-6),
+    "strain": Unit("strain", 1.0),
+    "strain_percent": Unit("strain", 0.01),
+    "stretch_ratio": Unit("stretch", 1.0),
+    "cycles": Unit("cycles", 1.0),
+}
+# The canonical quantity each derived one is read as.
+DERIVED_QUANTITY = {
+    "stress": "force",
+    "strain": "elongation",
+    "stretch": "elongation",
+    "cycles": "time",
+}
 _REQUIRED = ("time", "force")
 # The `columns` name of a file column to skip (not parsed).
 IGNORE = "-"
