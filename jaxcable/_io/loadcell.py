@@ -21,12 +21,14 @@ tension), the rest reading r = d x the plateau's median is an offset, removed, w
 
 - r < -band: the cable at rest would push (a tension test whose cell reads below
   zero before it is loaded), or
-- r > band, the test then loads above its rest reading and unloads below it, each
-  by more than m = max(band, 10 % of r) (max d F > r + m, min d F < r - m), yet
-  the cell never reads zero (min d F > band): a preload is held or left for zero,
-  never undercut without reaching zero, and a test that starts at its load (a
-  creep test) stays near it; so a rest reading that the test moves away from both
-  ways, but never to zero, is the cell's zero.
+- r > band, the test loads above it (max d F > r + m, m = max(band, 10 % of r)),
+  comes back to the rest elongation (or short of it) and reads less there (d F <
+  r - m), and yet the cell never reads zero (min d F > band). A preload is held,
+  left for zero, or left at a larger elongation (a creep test's recovery at a
+  lower load); a test that starts at its load (a creep record at its mean load)
+  never loads well above it. The rule cannot tell an offset from a preload that
+  the specimen loses for good without going slack (a set, a Mullins softening, or
+  the grips' inertia in fast cycles reading below it): `tare=False` keeps it.
 
 `band` is the slack threshold of [`jaxcable.mask_slack`][]: max(0.5 % of the
 peak |F|, 3 x the force noise), at most 5 % of the peak. A zeroed cell (|r| <=
@@ -35,6 +37,7 @@ never undercut, or undercut down to zero) keep their readings.
 """
 
 import dataclasses
+import math
 
 import numpy as np
 
@@ -92,19 +95,33 @@ def _tension_negative(force: np.ndarray, elongation: np.ndarray) -> str | None:
     )
 
 
-def _rest(force: np.ndarray, elongation: np.ndarray, noise: float) -> int:
-    """The number of samples of the rest plateau (0 when there is none)."""
-    still = max(
+def _still(elongation: np.ndarray) -> float:
+    """How far the elongation may be from a value and still be at it, m."""
+    return max(
         REST_NOISE_FACTOR * force_noise(elongation),
         REST_RANGE_FRACTION * float(np.ptp(elongation)),
     )
-    moved = np.flatnonzero(np.abs(elongation - elongation[0]) > still)
+
+
+def _rest(force: np.ndarray, elongation: np.ndarray, noise: float) -> int:
+    """The number of samples of the rest plateau (0 when there is none)."""
+    moved = np.flatnonzero(np.abs(elongation - elongation[0]) > _still(elongation))
     n = int(moved[0]) if moved.size else elongation.size
     if n < REST_MIN_SAMPLES or n == elongation.size:
         return 0
     if np.std(force[:n]) > REST_NOISE_FACTOR * noise:
         return 0
     return n
+
+
+def _back_at_rest(elongation: np.ndarray, n: int) -> np.ndarray:
+    """The samples after the rest plateau (its first `n`) at or short of the rest
+    elongation (on the side away from the test's largest excursion)."""
+    change = elongation - elongation[0]
+    side = 1.0 if np.max(change) >= -np.min(change) else -1.0
+    back = side * change <= _still(elongation)
+    back[:n] = False
+    return back
 
 
 def _tare(force: np.ndarray, elongation: np.ndarray, lines) -> tuple[float, str]:
@@ -116,28 +133,35 @@ def _tare(force: np.ndarray, elongation: np.ndarray, lines) -> tuple[float, str]
     band = _band(force, noise)
     direction = 1.0 if np.max(force) >= -np.min(force) else -1.0
     level = float(np.median(force[:n]))
-    rest, lowest = direction * level, float(np.min(direction * force))
+    tension = direction * force
+    rest, lowest, highest = direction * level, np.min(tension), np.max(tension)
+    back = _back_at_rest(elongation, n)
+    at_back = float(np.min(tension[back])) if back.any() else math.inf
+    margin = max(band, REST_MOVE_FRACTION * abs(rest))
     where = f"lines {lines[0]}-{lines[n - 1]}" if lines is not None else f"{n} samples"
     at_rest = (
         f"the load cell read {level:.4g} N at rest ({where}, the elongation not yet "
         f"moving, the force constant within {np.std(force[:n]):.2g} N)"
     )
-    margin = max(band, REST_MOVE_FRACTION * abs(rest))
-    highest = float(np.max(direction * force))
     if rest < -band:
         why = "a cable at rest cannot push"
-    elif rest > band and band < lowest < rest - margin and highest > rest + margin:
+    elif (
+        rest > band and band < lowest and at_back < rest - margin < highest - 2 * margin
+    ):
         why = (
-            f"the test loads above it and unloads below it (to {direction * lowest:.4g}"
-            " N) without the cell ever reading zero: an offset, not a preload"
+            "the test loads above it, comes back to the rest elongation and reads "
+            f"less there (down to {direction * at_back:.4g} N), without the cell ever "
+            "reading zero: an offset, not a preload"
         )
     else:
         if abs(rest) <= band:
             return 0.0, ""
         if lowest <= band:
             reason = "the cell reads zero later: it is zeroed"
-        elif lowest >= rest - margin:
-            reason = "the test never unloads well below it"
+        elif not back.any():
+            reason = "the test never comes back to the rest elongation"
+        elif at_back >= rest - margin:
+            reason = "the test reads as much at the rest elongation later"
         else:
             reason = "the test never loads well above it"
         return 0.0, f"{at_rest} is kept as a load the test starts with ({reason})"
