@@ -83,8 +83,9 @@ def read_data(path, options: dict, *, require_force: bool = True) -> TestData:
     differences), at most 5 % of the peak. Before that, a load cell that reads
     tension as negative is read with its sign flipped, and an offset at rest is
     removed, where the file shows them (`force_sign="auto"`, `tare=True` unless the
-    options say otherwise; each said in the test's notes). A file without a force column (with
-    `require_force=False`, an elongation history) is read as written."""
+    options say otherwise; each said in the test's notes). A file without a force
+    column (with `require_force=False`, an elongation history) is read as
+    written."""
     options = dict(options)
     stretches = options.pop("detect_slack", True)
     # The load cell's sign and offset at rest, corrected where the file shows them

@@ -64,9 +64,9 @@ def _map_token(token: str, position: int, name: str | None, path, shown: str):
     if unit is None:
         if token == IGNORE:
             return ColumnMap(IGNORE, IGNORE, 1.0, position)
+        which = position if name is None else repr(name)
         raise ValueError(
-            f"{path}: columns '{shown}': column {position if name is None else repr(name)} "
-            f"'{token}' is not a column name (accepted: {_ACCEPTED}, or '-' to "
+            f"{path}: columns '{shown}': column {which} '{token}' is not a column name (accepted: {_ACCEPTED}, or '-' to "
             "ignore a column)."
         )
     return ColumnMap(

@@ -141,7 +141,15 @@ def read_test(
         `time_h`, `force_N`, `force_kN`, `force_lbf`, `force_kgf`,
         `elongation_mm`, `elongation_cm`, `elongation_m`, `elongation_in`,
         `temperature_C`, and `-` for a column to ignore (not parsed). Time and force
-        are required.
+        are required. Also read: `stress_MPa`, `stress_kPa`, `stress_Pa` (the force
+        = the stress x the area of a circle of `diameter_mm`: a stress record reads
+        with any consistent area), `strain`, `strain_percent` (the elongation = the
+        strain x `length_mm`), `stretch_ratio` (lambda: the elongation = (lambda -
+        1) x `length_mm`) and `cycles` (a cycle count: the time is N /
+        `frequency_hz`, a burst of samples at one count read as one sample, its
+        mean; see `jaxcable/_io/cycles.py` for why). Or some columns by their
+        header names, `"Machine_Load=force_kN,Machine_N_cycles=cycles"`: the first
+        row holding every name is the header, its other columns are not read.
     - `skip_rows`: the number of lines before the first data row, counted from the
         top of the file (blank, metadata, preamble, header and unit lines alike);
         `None` to detect it.
@@ -157,6 +165,18 @@ def read_test(
     - `detect_slack`: whether to detect and mask slack stretches.
     - `slack_threshold_N`: the slack force threshold, N, or `None` for the default
         rule.
+    - `force_sign`: `1` (the force as written), `-1` (flipped) or `"auto"`:
+        flipped where the load cell reads tension as negative (the force mostly
+        negative and growing in magnitude as the elongation grows from its start;
+        a compression test is read as written). The command line reads with
+        `"auto"`. Rules in `jaxcable/_io/loadcell.py`; each correction is a note.
+    - `tare`: whether a load cell's offset at rest (the force of the first samples,
+        before the elongation moves, constant within the noise) is removed where
+        it is clearly one: a reading below zero at rest, or one the test loads
+        above and, back at the rest elongation, reads below, never reading zero.
+        A preload is kept. The command line reads with `True`.
+    - `frequency_hz`: the test frequency, Hz, of a file timed by a cycle count
+        (`cycles` in `columns`); `None` otherwise.
     - `require_force`: whether the file must have a force column; `False` reads a
         canonical elongation history (`time_s,elongation_mm`) with NaN forces, for
         an elongation-driven simulation (no slack detection then).
