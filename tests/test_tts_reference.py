@@ -103,6 +103,7 @@ def test_the_base_is_the_material_at_the_median(case):
     assert median == pytest.approx(reference, abs=0.1)
     text = d.summary()
     assert f"base is the material at {median:.1f} °C" in text
+    assert "the tests' median" in d.candidate("temperature").note
     (out,) = [c for c in d.to_dict()["candidates"] if c["id"] == "temperature"]
     assert out["reference"]["celsius"] == pytest.approx(median, abs=1e-3)
 

@@ -94,14 +94,16 @@ def _references(r) -> list[str]:
         if not ref:
             continue
         if ref["field"] == "T_ref":
+            # The catalogue's note says where and why.
             at = f"{ref['celsius']:.1f} °C"
-            where = "the tests' median temperature"
+            text = c.note or f"reference {at}: its base is the material at {at}"
         else:
             at = f"{ref['value']:.4g} in the unit of {c.covariate!r}"
-            where = f"the median of {c.covariate!r}"
-        out.append(
-            f"{c.id}: reference {at} ({where}): its base is the material at {at}"
-        )
+            text = (
+                f"reference {at} (the median of {c.covariate!r}): its base is the "
+                f"material at {at}"
+            )
+        out.append(f"{c.id}: {text}")
     return out
 
 

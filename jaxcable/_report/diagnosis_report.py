@@ -152,14 +152,14 @@ def _notes(diagnosis: Diagnosis) -> list[str]:
         ref = c.reference if c.applicable else {}
         if not ref:
             continue
-        if ref["field"] == "T_ref":
-            at, where = f"{ref['celsius']:.1f} °C", "the tests' median temperature"
-        else:
-            at, where = f"{ref['value']:.4g}", f"the median of {c.covariate!r}"
         whose = "the named model's base" if c.id in named else "its base"
-        lines.append(
-            f"- {c.id}: reference at {at} ({where}): {whose} is the material at {at}."
-        )
+        if ref["field"] == "T_ref":
+            at = f"{ref['celsius']:.1f} °C"
+            why = c.note.split(":")[0] if c.note else f"reference {at}"
+        else:
+            at = f"{ref['value']:.4g}"
+            why = f"reference {at} (the median of {c.covariate!r})"
+        lines.append(f"- {c.id}: {why}: {whose} is the material at {at}.")
     return lines
 
 

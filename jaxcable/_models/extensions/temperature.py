@@ -64,7 +64,7 @@ def reduced_time(
 def reference_temperature():
     """The field `T_ref` of a temperature shift: the reference temperature, K (> 0;
     default 293.15 K, the default `Cable.temperature`), at which a_T = 1. A
-    diagnosis sets it to the data's median temperature
+    diagnosis tries it at the data's median temperature
     ([`jaxcable.with_data_reference`][])."""
     return setting(293.15, unit="K")
 
@@ -238,8 +238,9 @@ class TemperatureShift(AbstractTemperatureShift):
     - `activation_energy`: E_a, J/mol (>= 0).
     - `T_ref`: the reference temperature, K (> 0; default 293.15 K, the default
         `Cable.temperature`), at which a_T = 1: the base's parameters are the
-        material's at T_ref. [`jaxcable.diagnose`][] takes it at the data's
-        median temperature ([`jaxcable.with_data_reference`][]).
+        material's at T_ref. [`jaxcable.diagnose`][] tries it at the data's
+        median temperature ([`jaxcable.with_data_reference`][]) and keeps it
+        there unless the start's own fits the training data better.
 
     `wrap(base)` starts a fit at `activation_energy = 1e4 J/mol` (a_T ~ 0.87 at 10 K
     above T_ref; thermally activated creep of UHMWPE is ~ 1e5 J/mol).
