@@ -137,4 +137,3 @@ def test_white_part_of_white_noise():
     rng = np.random.default_rng(5)
     r = 2.0 * rng.standard_normal(5000) + np.linspace(0.0, 50.0, 5000) ** 1.5 / 100
     assert white_part(r) == pytest.approx(2.0, rel=0.05)
-    assert white_part(r, robust=False) == pytest.approx(2.0, rel=0.05)
