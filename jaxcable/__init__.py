@@ -2,8 +2,10 @@ import importlib.metadata
 
 from . import states as states
 from ._cable import (
+    DEFAULT_BREAKING_LOAD_N as DEFAULT_BREAKING_LOAD_N,
     DEFAULT_BREAKING_STRAIN as DEFAULT_BREAKING_STRAIN,
     Cable as Cable,
+    default_breaking_load as default_breaking_load,
 )
 from ._cache import (
     clear_compilation_cache as clear_compilation_cache,
@@ -98,8 +100,6 @@ from ._models import (
     log_shift_arrhenius as log_shift_arrhenius,
     log_shift_wlf as log_shift_wlf,
     piao_five_element as piao_five_element,
-)
-from ._models.extensions.temperature import (
     with_data_reference as with_data_reference,
 )
 from ._montecarlo import (

@@ -227,9 +227,11 @@ def test_other_base_models_refit_all_their_parameters(clean_tests):
         unbreakable,
         jc.BurgersModel(),
         candidates=["hereditary", "termination_compliance"],
-        # The point is which parameters are fitted: one round, no discovery.
+        # The point is which parameters are fitted: one round, no discovery, and
+        # no other family (these data want the integrated model's).
         discover=False,
         max_rounds=1,
+        family=False,
     )
     assert set(d.base_fit.names) == {"E1", "eta0", "E2", "eta2"}
     here = d.candidate("hereditary")

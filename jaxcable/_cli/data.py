@@ -20,6 +20,11 @@ from .._io import (
 )
 from .._progress import AbstractProgressMeter
 from .common import PROG, CliError, one_line
+from .numbers import (
+    breaking_strain as _breaking_strain,
+    non_negative_int as _non_negative_int,
+    positive_float as _positive_float,
+)
 
 
 # The csv module's limit on one cell (its default, 128 KiB): a longer cell is no
@@ -55,6 +60,98 @@ def read_located(read: Callable[..., TestData], path, **options) -> TestData:
                 warning.message, warning.category, warning.filename, warning.lineno
             )
     return data
+
+
+def add_data_options(parser) -> None:
+    """The options that say how to read the data files: the same for every command
+    that reads them (`fit`, `diagnose`, `design`, `simulate HISTORY.csv`)."""
+    raw = parser.add_argument_group(
+        "reading data files (every command reads them alike)"
+    )
+    raw.add_argument(
+        "--columns",
+        metavar="NAMES",
+        help="the files' columns in order with their units, e.g. "
+        "time_s,elongation_mm,force_N (also time_ms, time_min, time_h, force_kN, "
+        "elongation_m, temperature_C; '-' for a column to ignore), or some of them "
+        "by their header names, e.g. Load=force_kN,Cycles=cycles (the others not "
+        "read); also stress_MPa, stress_kPa, stress_Pa (force = stress x the area "
+        "of --diameter-mm), strain, strain_percent (elongation = strain x "
+        "--length-mm), stretch_ratio (elongation = (ratio - 1) x "
+        "--length-mm), cycles (a cycle count: time = N / --frequency-hz, each burst "
+        "of samples at one count read as its mean); default: from the header",
+    )
+    raw.add_argument(
+        "--frequency-hz",
+        type=_positive_float,
+        metavar="F",
+        help="the test frequency, Hz, of files whose time is a cycle count "
+        "('cycles' in --columns)",
+    )
+    raw.add_argument(
+        "--force-sign",
+        choices=("auto", "+1", "-1"),
+        default="auto",
+        help="the sign of the files' force: +1 as written, -1 flipped, auto "
+        "(default) flipped where the load cell reads tension as negative (the force "
+        "mostly negative and growing in magnitude as the elongation grows; a "
+        "compression test, force and elongation both negative, is read as written)",
+    )
+    raw.add_argument(
+        "--no-tare",
+        action="store_true",
+        help="keep a load cell's offset at rest (by default, the force of the first "
+        "samples, before the elongation moves, is removed where it is clearly an "
+        "offset: a reading below zero at rest, or one the test loads above and "
+        "unloads below without ever reading zero; a preload is kept)",
+    )
+    raw.add_argument(
+        "--skip-rows",
+        type=_non_negative_int,
+        metavar="N",
+        help="lines before the first data row (default: detected)",
+    )
+    raw.add_argument(
+        "--length-mm",
+        type=_positive_float,
+        metavar="X",
+        help="free length of the cable, mm (replaces the files' length_mm)",
+    )
+    raw.add_argument(
+        "--diameter-mm",
+        type=_positive_float,
+        metavar="X",
+        help="diameter, mm (replaces the files' diameter_mm; default 3)",
+    )
+    raw.add_argument(
+        "--rate-mm-per-min",
+        type=_positive_float,
+        metavar="X",
+        help="crosshead speed, mm/min (replaces the files' rate_mm_per_min; default 3)",
+    )
+    raw.add_argument(
+        "--no-slack",
+        action="store_true",
+        help="do not detect slack stretches (by default, stretches where the force "
+        "is about zero while the elongation moves at the crosshead's speed are "
+        "masked and not fitted; a fast recovery at zero force can look like one). "
+        "Either way a force reading below zero within the load cell's noise is read "
+        "as 0 N: the tolerance is max(0.5%% of the peak force, 3 x the noise of the "
+        "file's own force, from its second differences), at most 5%% of the peak; "
+        "a reading below it is refused, naming file, line and column, where the "
+        "force drives the model (and masked where the elongation does)",
+    )
+    limits = parser.add_argument_group("the material's limits")
+    limits.add_argument(
+        "--breaking-strain",
+        type=_breaking_strain,
+        metavar="X",
+        help="breaking strain (elongation / length at break; 'inf' for a material "
+        "that does not break): a simulation beyond it fails (replaces the files' "
+        "'# breaking_strain:'). Default: the files' value; with only a "
+        "'# breaking_load_N:', none before a fit and, after one, the fitted model's "
+        "strain at that load in a ramp at the crosshead speed; else none",
+    )
 
 
 def data_options(args) -> dict:

@@ -1,8 +1,7 @@
 """The third stage of [`jaxcable.diagnose`][]: every candidate of the catalogue
 ([`jaxcable.EXTENSIONS`][]) fitted around the base and scored like it."""
 
-from .._models import EXTENSIONS, AbstractCableModel
-from .._models.extensions.temperature import with_data_reference
+from .._models import EXTENSIONS, AbstractCableModel, with_data_reference
 from .._progress import AbstractProgressMeter
 from .base import BaseFit
 from .plan import Plan

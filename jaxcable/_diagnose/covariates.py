@@ -13,8 +13,7 @@ import jax.numpy as jnp
 
 from .._drive import FORCE_DRIVEN
 from .._fit import IdentifiabilityWarning, fit
-from .._models import COVARIATE_EXTENSIONS
-from .._models.extensions.temperature import with_data_reference
+from .._models import COVARIATE_EXTENSIONS, with_data_reference
 from .._progress import AbstractProgressMeter
 from .base import BaseFit
 from .discover import term_coefficient

@@ -23,8 +23,8 @@ from .._models import (
     AbstractExtension,
     BurgersModel,
     IntegratedModel,
+    field_facts,
 )
-from .._models.fields import field_facts
 from .._models.piao import AbstractFiveElement
 from .data import as_test_list, resolve_drives
 
@@ -183,6 +183,9 @@ def _loading(test) -> _Loading | None:
     """The first loading of `test`, or None when it has none (no rise of force):
     its own samples, every k-th of a longer one (no interpolation: for data of the
     model itself the start's strain is the data's exactly), padded."""
+    if test.elongation is None:
+        # Nothing to scale by: the fit names the test that lacks it.
+        return None
     time = np.asarray(test.time, float)
     force = np.maximum(np.asarray(test.force, float), 0.0)
     cable = test.cable()

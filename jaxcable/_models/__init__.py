@@ -45,8 +45,10 @@ from .extensions import (
     log_shift_arrhenius as log_shift_arrhenius,
     log_shift_wlf as log_shift_wlf,
     memory as memory,
+    with_data_reference as with_data_reference,
 )
 from .fields import (
+    field_facts as field_facts,
     parameter as parameter,
     parameter_table as parameter_table,
     setting as setting,

@@ -56,6 +56,7 @@ from .temperature import (
     TemperatureShiftWLF as TemperatureShiftWLF,
     log_shift_arrhenius as log_shift_arrhenius,
     log_shift_wlf as log_shift_wlf,
+    with_data_reference as with_data_reference,
 )
 
 
