@@ -4,9 +4,11 @@ one not zeroed before the test (tared), a fatigue record timed by its cycle coun
 and logged in bursts (one sample per burst, t = N / f), a header found by its names
 above a data row that carries a label, a stretch ratio and a stress in kPa; and
 each rule not applied where it must not be: a compression test, a preloaded creep
-test, a creep record at its mean load, a zeroed load cell."""
+test, a creep record at its mean load, a zeroed load cell; an Anton Paar RheoCompass
+export (UTF-16, tabs, decimal commas, a status text column)."""
 
 import csv
+import json
 import math
 import pathlib
 
@@ -246,3 +248,77 @@ def test_command_line_options_reach_the_reader():
         ]
     )
     assert read_data(str(LIU), data_options(args)).num_samples == 62
+
+
+PYRHEO = REAL / "pyRheo"
+RHEO_TEXT = (
+    "Test:\tHC1\r\nResult:\tStep strain\r\n"
+    "Point No.\tTime\tShear Strain\tShear Stress\tTemperature\tStatus\r\n"
+    "\t\t\t\t\t\r\n\t[s]\t[%]\t[Pa]\t[°C]\t\r\n"
+    "1\t0,010\t0,019\t7,922\t20,00\tDy_auto\r\n"
+    "2\t0,021\t0,0499\t-1,2326\t20,00\tDy_auto\r\n"
+    "3\t0,031\t0,0773\t-2,3138\t20,01\tDy_auto\r\n"
+)
+
+
+def test_rheocompass_export_reads_with_its_record_options():
+    """The RheoCompass export (UTF-16 with a byte-order mark, CRLF, tabs, decimal
+    commas, a `Status` column of text) read with the options of its record: the
+    strain in % as the elongation of a 1 mm cable, the stress in Pa as the force
+    on a 1 m^2 section; the status column not read, as the notes say."""
+    (record,) = [
+        r
+        for r in json.loads((REAL / "records.json").read_text())["records"]
+        if r["id"] == "cnf_hydrogel_step_strain_relaxation"
+    ]
+    path = str(REAL / record["files"][0])
+    args = build_parser().parse_args(["fit", path, *record["options"], "--out", "p"])
+    data = read_data(path, data_options(args))
+    text = pathlib.Path(path).read_bytes().decode("utf-16")
+    rows = [line.split("\t") for line in text.splitlines()]
+    rows = [r for r in rows if r[0].strip().isdigit()]
+    time, strain, stress = (
+        np.array([float(r[i].replace(",", ".")) for r in rows]) for i in (1, 2, 3)
+    )
+    area_m2 = math.pi * 1.12838**2 / 4
+    assert data.num_samples == len(rows) == 264
+    np.testing.assert_allclose(data.time, time, rtol=1e-12)
+    np.testing.assert_allclose(data.elongation, strain / 100 * 1e-3, rtol=1e-12)
+    # The ringing step's negative stresses are clipped to 0 by the slack detection.
+    np.testing.assert_allclose(data.force, np.maximum(stress, 0) * area_m2, rtol=1e-12)
+    assert data.column_names["force"] == "Shear Stress"
+    assert any("'Status' (text: 'Dy_auto')" in note for note in data.notes)
+
+
+@pytest.mark.parametrize("encoding", ["utf-16", "utf-16-be", "utf-32"])
+def test_wide_encodings_read_like_utf8(tmp_path, encoding):
+    """UTF-16 and UTF-32 with a byte-order mark, and UTF-16 without one (`utf-16-be`
+    writes none), read like the same text in UTF-8 (the header's `°C` too)."""
+    twin, wide = tmp_path / "utf8.txt", tmp_path / "wide.txt"
+    twin.write_bytes(RHEO_TEXT.encode("utf-8"))
+    wide.write_bytes(RHEO_TEXT.encode(encoding))
+    options = dict(length_mm=1.0, diameter_mm=10.0, detect_slack=False)
+    a, b = jc.read_test(twin, **options), jc.read_test(wide, **options)
+    np.testing.assert_allclose(a.temperature, [20.0, 20.0, 20.01])
+    for name in ("time", "elongation", "force", "temperature"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+    assert a.notes == b.notes and a.column_names == b.column_names
+
+
+def test_text_column_not_read_but_a_word_in_a_read_column_refused(tmp_path):
+    """A column of text in every data row is not read (named in the notes); a word
+    in a column that is read is refused, naming the file, line and column."""
+    path = tmp_path / "status.csv"
+    path.write_text(RHEO_TEXT.replace(",", "."), encoding="utf-8")
+    data = jc.read_test(path, length_mm=1.0, diameter_mm=10.0, detect_slack=False)
+    np.testing.assert_allclose(data.time, [0.010, 0.021, 0.031])
+    assert data.lines.tolist() == [6, 7, 8]
+    (note,) = data.notes
+    assert "'Status' (text: 'Dy_auto')" in note and "'Point No.'" in note
+    path.write_text(
+        RHEO_TEXT.replace(",", ".").replace("-1.2326", "n.a."), encoding="utf-8"
+    )
+    with pytest.raises(ValueError) as error:
+        jc.read_test(path, length_mm=1.0, diameter_mm=10.0)
+    message = str(error.value)
+    assert f"{path}, line 7, column 4 " in message and "'n.a.'" in message

@@ -177,14 +177,21 @@ def derived_notes(columns: list[ColumnMap], metadata: dict) -> tuple[str, ...]:
     return tuple(notes)
 
 
-def column_notes(columns: list[ColumnMap], named_by: str) -> tuple[str, ...]:
+def column_notes(
+    columns: list[ColumnMap], named_by: str, text: dict[int, str] | None = None
+) -> tuple[str, ...]:
     """One line naming the columns of a header that are not read (none for a
-    `columns` value, which names them itself), and one per derived channel."""
+    `columns` value, which names them itself), and one per derived channel; a text
+    column (`text`: 1-based position -> a cell of it, `Dy_auto`) shown with its
+    text."""
     if named_by != "the header":
         return ()
+    text = text or {}
     notes = []
     skipped = [
-        repr(c.name) for c in columns if c.quantity == IGNORE and c.name != IGNORE
+        repr(c.name) + (f" (text: {text[c.position]!r})" if c.position in text else "")
+        for c in columns
+        if c.quantity == IGNORE and c.name != IGNORE
     ]
     if skipped:
         notes.append(f"columns not read: {', '.join(skipped)}")

@@ -23,6 +23,7 @@ from .parsing import (
     assemble,
     metadata_value,
     parse_metadata,
+    parse_number,
     parse_rows,
     row_cells,
 )
@@ -33,6 +34,7 @@ from .sniff import (
     find_data_start,
     header_columns,
     sniff_separator,
+    text_columns,
 )
 from .testdata import TestData, mask_slack
 from .text import read_lines
@@ -50,6 +52,24 @@ def _header_names(header: str, sep: str, columns: list[ColumnMap]) -> dict:
         and c.position <= len(cells)
         and cells[c.position - 1]
     }
+
+
+def _text_examples(lines, start: int, sep: str, decimal_comma: bool) -> dict[int, str]:
+    """Per text column of the data rows from `lines[start]` on (1-based position,
+    see `text_columns`), its first cell that is not a number."""
+    positions = text_columns(lines, start, sep, decimal_comma)
+    found: dict[int, str] = {}
+    for line in lines[start : start + 200]:
+        cells = row_cells(line, sep)
+        for position in positions - {p - 1 for p in found}:
+            if position < len(cells):
+                try:
+                    parse_number(cells[position], decimal_comma)
+                except ValueError:
+                    found[position + 1] = cells[position]
+        if len(found) == len(positions):
+            break
+    return found
 
 
 def read_test(
@@ -291,7 +311,8 @@ def read_test(
     values, line_numbers, column_map, timed = cycles_to_time(
         values, line_numbers, column_map, frequency_hz, path
     )
-    notes = column_notes(column_map, named_by) if by_name is None else ()
+    text = _text_examples(lines, start, sep, decimal_comma) if spec is None else None
+    notes = column_notes(column_map, named_by, text) if by_name is None else ()
     notes += derived_notes(column_map, metadata) if spec is not None else ()
     notes += timed
     column_map = derive_channels(column_map, metadata, path, header_line)

@@ -3,6 +3,7 @@ writes decimal commas), its first data row, and its columns from a free-form hea
 (names such as `Force (kN)` or 时间 over a units row) matched best-effort."""
 
 import re
+from collections import Counter
 
 from .parsing import ColumnMap, map_columns, parse_number, row_cells
 from .testdata import where
@@ -43,34 +44,87 @@ def _is_number(cell: str, decimal_comma: bool) -> bool:
     return True
 
 
-def _all_numbers(cells: list[str], decimal_comma: bool) -> bool:
-    """Whether `cells` is a row of at least 2 numbers (for sniffing the separator)."""
-    return len(cells) >= 2 and all(_is_number(c, decimal_comma) for c in cells)
+def _text_cells(cells: list[str], decimal_comma: bool) -> frozenset[int] | None:
+    """The positions of the text cells (`Dy_auto`, `OK`: a letter, not a number) of
+    a row of at least 2 numbers, or None if the row is not one or has a cell that
+    is neither (empty, `12..5`)."""
+    numbers, text = 0, []
+    for position, cell in enumerate(cells):
+        if _is_number(cell, decimal_comma):
+            numbers += 1
+        elif _NON_NUMBER_WORD.search(cell):
+            text.append(position)
+        else:
+            return None
+    return frozenset(text) if numbers >= 2 else None
+
+
+def _text_columns(rows: list[list[str]], decimal_comma: bool) -> frozenset[int]:
+    """The positions of the text columns of the data rows among `rows` (a status or
+    label column: RheoCompass writes `Dy_auto` in every row): those of the text
+    cells that most rows of at least 2 numbers have (none where most have none).
+
+    A row whose numeric cells are numbers and whose only other cells sit in these
+    columns is a data row; the columns are then not read, but for the header
+    naming one as a quantity, whose cells are then reported as not numbers.
+    """
+    shapes = Counter(
+        shape
+        for shape in (_text_cells(cells, decimal_comma) for cells in rows)
+        if shape is not None
+    )
+    if not shapes:
+        return frozenset()
+    # Of as common ones, the one with fewer text columns.
+    return max(shapes, key=lambda shape: (shapes[shape], -len(shape)))
+
+
+def _sample(lines: list[str], first: int) -> list[str]:
+    """The first 200 content lines from `lines[first]` on."""
+    sample = []
+    for text in lines[first:]:
+        if _is_content(text):
+            sample.append(text)
+            if len(sample) == 200:
+                break
+    return sample
 
 
 def sniff_separator(lines: list[str], first: int) -> tuple[str, bool]:
     """The separator (`,`, `;` or tab) and decimal-comma flag under which most of the
-    first 200 content lines are rows of numbers; `,` when none is."""
-    sample = []
-    for text in lines[first:]:
-        if text.strip() and not text.lstrip().startswith("#"):
-            sample.append(text)
-            if len(sample) == 200:
-                break
+    first 200 content lines are rows of numbers (cells of the rows' text columns
+    aside, see `_text_columns`); `,` when none is."""
+    sample = _sample(lines, first)
     best = (0, ",", False)
     for sep in _SEPARATORS:
+        rows = [row_cells(text, sep) for text in sample]
         # A decimal comma is only possible where the comma does not separate cells.
         for decimal_comma in (False, True) if sep != "," else (False,):
-            count = sum(_all_numbers(row_cells(t, sep), decimal_comma) for t in sample)
+            text = _text_columns(rows, decimal_comma)
+            shapes = (_text_cells(cells, decimal_comma) for cells in rows)
+            count = sum(shape is not None and shape <= text for shape in shapes)
             if count > best[0]:
                 best = (count, sep, decimal_comma)
     return best[1], best[2]
 
 
+def text_columns(
+    lines: list[str], first: int, sep: str, decimal_comma: bool
+) -> frozenset[int]:
+    """The 0-based positions of the text columns of the data rows (see
+    `_text_columns`) among the first 200 content lines from `lines[first]` on."""
+    rows = [row_cells(text, sep) for text in _sample(lines, first)]
+    return _text_columns(rows, decimal_comma)
+
+
 def _looks_like_data(
-    cells: list[str], decimal_comma: bool, spec: list[ColumnMap] | None
+    cells: list[str],
+    decimal_comma: bool,
+    spec: list[ColumnMap] | None,
+    text: frozenset[int] = frozenset(),
 ) -> bool:
-    """Whether a row is the first data row: numbers, without words.
+    """Whether a row is the first data row: numbers, without words but in the `text`
+    columns (see `_text_columns`).
 
     A row with a bad number but no letters (`12..5`, an empty cell) counts as data,
     so that it is reported as an error rather than skipped as preamble; `nan` and
@@ -83,6 +137,8 @@ def _looks_like_data(
         cells = [cells[i] for i in positions]
     elif len(cells) < 2:
         return False
+    else:
+        cells = [cell for i, cell in enumerate(cells) if i not in text]
     numbers = 0
     for cell in cells:
         if _is_number(cell, decimal_comma):
@@ -371,12 +427,18 @@ def find_data_start(
 ) -> int:
     """0-based index of the first row of numbers at or after `first`: a first guess
     at the data, which `data_below_header` or `data_above` then move up over the
-    rows that are data with a typo."""
+    rows that are data with a typo. Without `spec`, the cells of the rows' text
+    columns (`text_columns`) may hold words."""
+    text_at = (
+        frozenset()
+        if spec is not None
+        else text_columns(lines, first, sep, decimal_comma)
+    )
     for index in range(first, len(lines)):
         text = lines[index]
         if not _is_content(text):
             continue
-        if _looks_like_data(row_cells(text, sep), decimal_comma, spec):
+        if _looks_like_data(row_cells(text, sep), decimal_comma, spec, text_at):
             return index
     raise ValueError(
         f"{path}: no data rows found (rows of numbers separated by "
