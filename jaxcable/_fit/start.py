@@ -21,11 +21,11 @@ from .._drive import simulate_force_history
 from .._models import (
     AbstractCableModel,
     AbstractExtension,
+    AbstractFiveElement,
     BurgersModel,
     IntegratedModel,
     field_facts,
 )
-from .._models.piao import AbstractFiveElement
 from .data import as_test_list, resolve_drives
 
 
