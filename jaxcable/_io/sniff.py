@@ -3,9 +3,14 @@ writes decimal commas), its first data row, and its columns from a free-form hea
 (names such as `Force (kN)` or 时间 over a units row) matched best-effort."""
 
 import re
-from collections import Counter
 
-from .parsing import ColumnMap, map_columns, parse_number, row_cells
+from .cells import (
+    NON_NUMBER_WORD as _NON_NUMBER_WORD,
+    is_number as _is_number,
+    text_cells as _text_cells,
+    text_columns_of as _text_columns,
+)
+from .parsing import ColumnMap, map_columns, row_cells
 from .testdata import where
 from .units import COLUMNS, IGNORE, missing_quantities, written_name
 from .vocabulary import (
@@ -29,54 +34,10 @@ _QUANTITY_UNITS = {unit for _, unit in HEADER_UNITS}
 # The brackets of `Name (unit)`, `Name [unit]`, also full-width.
 _OPENING = "([（【"
 _CLOSING = ")]）】"
-_NON_NUMBER_WORD = re.compile(r"[^\W\d_]", re.UNICODE)  # any letter
 _WORD = re.compile(r"[^\W\d_]{2,}", re.UNICODE)  # two letters or more in a row
 # What instruments write for a missing value (a whole row of these is a data row
 # with no values, not preamble). Anchored, no nested repetition: linear time.
 _MISSING = re.compile(r"(?:n/?a|nan|null|none|-+|\?+)", re.IGNORECASE)
-
-
-def _is_number(cell: str, decimal_comma: bool) -> bool:
-    try:
-        parse_number(cell, decimal_comma)
-    except ValueError:
-        return False
-    return True
-
-
-def _text_cells(cells: list[str], decimal_comma: bool) -> frozenset[int] | None:
-    """The positions of the text cells (`Dy_auto`, `OK`: a letter, not a number) of
-    a row of at least 2 numbers, or None if the row is not one or has a cell that
-    is neither (empty, `12..5`)."""
-    numbers, text = 0, []
-    for position, cell in enumerate(cells):
-        if _is_number(cell, decimal_comma):
-            numbers += 1
-        elif _NON_NUMBER_WORD.search(cell):
-            text.append(position)
-        else:
-            return None
-    return frozenset(text) if numbers >= 2 else None
-
-
-def _text_columns(rows: list[list[str]], decimal_comma: bool) -> frozenset[int]:
-    """The positions of the text columns of the data rows among `rows` (a status or
-    label column: RheoCompass writes `Dy_auto` in every row): those of the text
-    cells that most rows of at least 2 numbers have (none where most have none).
-
-    A row whose numeric cells are numbers and whose only other cells sit in these
-    columns is a data row; the columns are then not read, but for the header
-    naming one as a quantity, whose cells are then reported as not numbers.
-    """
-    shapes = Counter(
-        shape
-        for shape in (_text_cells(cells, decimal_comma) for cells in rows)
-        if shape is not None
-    )
-    if not shapes:
-        return frozenset()
-    # Of as common ones, the one with fewer text columns.
-    return max(shapes, key=lambda shape: (shapes[shape], -len(shape)))
 
 
 def _sample(lines: list[str], first: int) -> list[str]:
@@ -93,7 +54,7 @@ def _sample(lines: list[str], first: int) -> list[str]:
 def sniff_separator(lines: list[str], first: int) -> tuple[str, bool]:
     """The separator (`,`, `;` or tab) and decimal-comma flag under which most of the
     first 200 content lines are rows of numbers (cells of the rows' text columns
-    aside, see `_text_columns`); `,` when none is."""
+    aside, see `jaxcable._io.cells.text_columns_of`); `,` when none is."""
     sample = _sample(lines, first)
     best = (0, ",", False)
     for sep in _SEPARATORS:
@@ -112,7 +73,7 @@ def text_columns(
     lines: list[str], first: int, sep: str, decimal_comma: bool
 ) -> frozenset[int]:
     """The 0-based positions of the text columns of the data rows (see
-    `_text_columns`) among the first 200 content lines from `lines[first]` on."""
+    `jaxcable._io.cells.text_columns_of`) among the first 200 content lines from `lines[first]` on."""
     rows = [row_cells(text, sep) for text in _sample(lines, first)]
     return _text_columns(rows, decimal_comma)
 
@@ -124,7 +85,7 @@ def _looks_like_data(
     text: frozenset[int] = frozenset(),
 ) -> bool:
     """Whether a row is the first data row: numbers, without words but in the `text`
-    columns (see `_text_columns`).
+    columns (see `jaxcable._io.cells.text_columns_of`).
 
     A row with a bad number but no letters (`12..5`, an empty cell) counts as data,
     so that it is reported as an error rather than skipped as preamble; `nan` and
