@@ -148,6 +148,12 @@ SLOW_FIRST = (
     # still has up to two tests to run, so the other takes the calibration).
     f"{NOTEBOOK_RUNS}03_diagnose.ipynb]",  # 91 s
     "tests/test_diagnose.py",  # 78 s
+    "tests/test_real_records.py",  # 150-250 s, every real record fitted and diagnosed
+    "tests/test_tts_reference.py",  # 50-90 s
+    "tests/test_family.py",  # 65 s
+    "tests/test_commands_agree.py",  # 57 s
+    "tests/test_start_scaling.py",  # about 35 s
+    "tests/test_hardening_candidate.py",  # about 25 s
     f"{NOTEBOOK_RUNS}06_uncertainty.ipynb]",  # 50-140 s
     "tests/test_jax_contract.py",  # 54 s
     "tests/test_two_pass.py",  # 52 s
@@ -187,6 +193,7 @@ SLOW_FIRST = (
     "tests/test_physics.py",  # 6 s
     "tests/test_registry.py",  # 6 s
     "tests/test_exports.py",  # 6 s
+    "tests/test_noise_floor.py",  # 15 s
 )
 
 
