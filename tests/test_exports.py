@@ -61,7 +61,9 @@ CORPUS = [
         ((0, 1.0), (8, KN), (7, 1e-3)),
         30.0,
         {},
-        None,
+        # Read with its tension's sign flipped (as the load cell writes it
+        # negative), the strip's position is seen to be the one held and ramped.
+        "elongation",
     ),
     (
         "instron_data_processing/silicone_30a_20251029_145648_1.csv",
@@ -135,7 +137,10 @@ def test_the_corpus_is_whole():
 def test_export_reads_as_it_comes(row):
     name, sep, first, spec, length_mm, metadata, control = row
     path = EXPORTS / name
-    data = jc.read_test(path, length_mm=length_mm, detect_slack=False)
+    # The columns as written: no correction of the load cell's sign or offset.
+    data = jc.read_test(
+        path, length_mm=length_mm, detect_slack=False, force_sign=1, tare=False
+    )
     time, force, elongation = _own_columns(path, sep, first, spec)
     np.testing.assert_allclose(data.time, time, rtol=1e-12, atol=0)
     np.testing.assert_allclose(data.force, force, rtol=1e-12, atol=1e-300)

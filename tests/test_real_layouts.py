@@ -28,7 +28,9 @@ LIU = CCF / "Liu_2020-09_FA_measure_010.csv"
 LIU_COLUMNS = (
     "Machine_N_cycles=cycles,Machine_Displacement=elongation_mm,Machine_Load=force_kN"
 )
-AUTO = dict(force_sign="auto", tare=True)
+AUTO = dict(force_sign="auto", tare=True)  # the default
+# As written: no correction of the load cell.
+RAW = dict(force_sign=1, tare=False)
 
 
 def _columns(path, *names, encoding="utf-8-sig"):
@@ -45,7 +47,7 @@ def _columns(path, *names, encoding="utf-8-sig"):
 
 def _wavematrix(name, length_mm):
     path = WAVEMATRIX / name
-    raw = jc.read_test(path, length_mm=length_mm, detect_slack=False)
+    raw = jc.read_test(path, length_mm=length_mm, detect_slack=False, **RAW)
     auto = jc.read_test(path, length_mm=length_mm, detect_slack=False, **AUTO)
     return path, raw, auto
 
@@ -85,15 +87,15 @@ def test_wavematrix_offset_at_rest_is_tared():
     )
     np.testing.assert_allclose(untared.force, -1e3 * force_kN, rtol=1e-12)
     # Without the corrections the command line masked every sample.
-    assert not np.any(jc.read_test(path, length_mm=79).mask)
-    assert np.mean(jc.read_test(path, length_mm=79, **AUTO).mask) > 0.3
+    assert not np.any(jc.read_test(path, length_mm=79, **RAW).mask)
+    assert np.mean(jc.read_test(path, length_mm=79).mask) > 0.3
 
 
 def test_compression_test_is_read_as_written():
     """Force and elongation both going negative (a lattice crushed): no flip, no
     tare, no note about the load cell."""
     path = DATA / "exports" / "bluer" / "vero_clear_ccyclic_Specimen_RawData_6.csv"
-    raw = jc.read_test(path, length_mm=20, detect_slack=False)
+    raw = jc.read_test(path, length_mm=20, detect_slack=False, **RAW)
     auto = jc.read_test(path, length_mm=20, detect_slack=False, **AUTO)
     assert np.mean(raw.force < 0) > 0.9
     np.testing.assert_array_equal(auto.force, raw.force)
@@ -175,7 +177,12 @@ def test_fatigue_time_from_cycles():
     burst (a run of one count), its mean force and elongation, at t = N / f; the
     first data row (with the specimen's name) read."""
     data = jc.read_test(
-        LIU, columns=LIU_COLUMNS, frequency_hz=4.2, length_mm=64, detect_slack=False
+        LIU,
+        columns=LIU_COLUMNS,
+        frequency_hz=4.2,
+        length_mm=64,
+        detect_slack=False,
+        **RAW,
     )
     n, disp, load = _columns(
         LIU, "Machine_N_cycles", "Machine_Displacement", "Machine_Load"

@@ -185,10 +185,6 @@ def read_data(path, options: dict, *, require_force: bool = True) -> TestData:
     written."""
     options = dict(options)
     stretches = options.pop("detect_slack", True)
-    # The load cell's sign and offset at rest, corrected where the file shows them
-    # (`jaxcable._io.loadcell`), by every command alike.
-    options.setdefault("force_sign", "auto")
-    options.setdefault("tare", True)
     data = read_located(
         read_test, path, detect_slack=False, require_force=require_force, **options
     )

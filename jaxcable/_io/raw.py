@@ -89,8 +89,8 @@ def read_test(
     detect_slack: bool = True,
     slack_threshold_N: float | None = None,
     require_force: bool = True,
-    force_sign: int | str = 1,
-    tare: bool = False,
+    force_sign: int | str = "auto",
+    tare: bool = True,
     frequency_hz: float | None = None,
 ) -> TestData:
     """Read one test from a canonical CSV file or a raw tensile-tester export.
@@ -188,13 +188,12 @@ def read_test(
     - `force_sign`: `1` (the force as written), `-1` (flipped) or `"auto"`:
         flipped where the load cell reads tension as negative (the force mostly
         negative and growing in magnitude as the elongation grows from its start;
-        a compression test is read as written). The command line reads with
-        `"auto"`. Rules in `jaxcable/_io/loadcell.py`; each correction is a note.
+        a compression test is read as written; the default). Rules in `jaxcable/_io/loadcell.py`; each correction is a note.
     - `tare`: whether a load cell's offset at rest (the force of the first samples,
         before the elongation moves, constant within the noise) is removed where
         it is clearly one: a reading below zero at rest, or one the test loads
         above and, back at the rest elongation, reads below, never reading zero.
-        A preload is kept. The command line reads with `True`.
+        A preload is kept. Default `True`.
     - `frequency_hz`: the test frequency, Hz, of a file timed by a cycle count
         (`cycles` in `columns`); `None` otherwise.
     - `require_force`: whether the file must have a force column; `False` reads a
