@@ -1,7 +1,7 @@
 """Coverage of the posterior's credible intervals against the linearised standard
 errors, on the mixed fit of the drive targets (scripts/drive_targets.py).
 
-    python benchmarks/coverage.py [--seeds 20] [--samples 200] [--draws 300]
+    python benchmarks/posterior_coverage.py [--seeds 20] [--samples 200] [--draws 300]
         [--chains 4] [--warmup 300] [--noise fitted|robust] [--e1r-over-e1c 1.3]
         [--progress] [--json-out FILE]
 
