@@ -203,16 +203,27 @@ def line(outcome):
     )
 
 
-def markdown(document):
-    """docs/real_data.md's generated table from a document of this script."""
+def _short(outcome):
+    """A verdict, or 'refused: ' and the start of the refusal."""
+    if outcome["error"] is None:
+        return outcome["verdict"]
+    return "refused: " + outcome["error"][:160].replace("`", "'").replace("|", "/")
+
+
+def markdown(document, before=None):
+    """docs/real_data.md's generated table from a document of this script, with the
+    verdict of each record in the document `before` (an earlier run: another
+    version of the library) when given."""
+    earlier = {o["record"]: o for o in (before or {}).get("outcomes", [])}
     rows = [
-        "| record | source | licence | verdict | causes | held-out RMSE (base) | "
-        "noise (source) | seconds |",
-        "|---|---|---|---|---|---|---|---|",
+        "| record | source | licence | before | verdict | causes | held-out RMSE "
+        "(base) | noise (source) | seconds |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for o in document["outcomes"]:
+        was = _short(earlier[o["record"]]) if o["record"] in earlier else "-"
         if o["error"] is not None:
-            verdict = "refused: " + o["error"][:200].replace("`", "'").replace("|", "/")
+            verdict = _short(o)
             rmse = noise = causes = "-"
         else:
             verdict = o["verdict"]
@@ -220,7 +231,8 @@ def markdown(document):
             rmse = f"{_fmt(o['heldout_rmse'])} ({_fmt(o['base_heldout_rmse'])}) {o['unit']}"
             noise = f"{_fmt(o['noise'])} {o['unit']} ({o['noise_source'] or 'not reported'})"
         rows.append(
-            f"| {o['record']} | {o['source']} | {o['licence']} | {verdict} | {causes} "
+            f"| {o['record']} | {o['source']} | {o['licence']} | {was} | {verdict} "
+            f"| {causes} "
             f"| {rmse} | {noise} | {o['seconds']} |"
         )
     return "\n".join(rows) + "\n"
@@ -230,11 +242,11 @@ BEGIN = "<!-- BEGIN GENERATED: benchmarks/real_records.py --markdown -->"
 END = "<!-- END GENERATED -->"
 
 
-def write_markdown(path, document):
+def write_markdown(path, document, before=None):
     """Replace the generated block of `path` (between BEGIN and END) by the table;
     write a bare page when the file or its markers are missing."""
     path = pathlib.Path(path)
-    block = f"{BEGIN}\n\n{markdown(document)}\n{END}"
+    block = f"{BEGIN}\n\n{markdown(document, before)}\n{END}"
     text = path.read_text(encoding="utf-8") if path.exists() else ""
     if BEGIN in text and END in text:
         head, rest = text.split(BEGIN, 1)
@@ -256,6 +268,12 @@ def main(argv=None):
     parser.add_argument("--markdown", metavar="FILE", help="write the table into FILE")
     parser.add_argument(
         "--from-json", metavar="FILE", help="take the outcomes from FILE, run nothing"
+    )
+    parser.add_argument(
+        "--before",
+        metavar="FILE",
+        help="a document of an earlier run (another version of the library): its "
+        "verdicts in the table's 'before' column",
     )
     args = parser.parse_args(argv)
 
@@ -285,7 +303,10 @@ def main(argv=None):
     if args.write_outcomes:
         OUTCOMES.write_text(text + "\n", encoding="utf-8")
     if args.markdown:
-        write_markdown(args.markdown, document)
+        before = None
+        if args.before:
+            before = json.loads(pathlib.Path(args.before).read_text(encoding="utf-8"))
+        write_markdown(args.markdown, document, before)
     return 0
 
 

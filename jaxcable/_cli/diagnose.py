@@ -91,6 +91,7 @@ def diagnose_command(args) -> int:
         key=jax.random.key(args.seed),
         drive=[d.control for d in drives],
         max_rounds=args.max_rounds,
+        family={"auto": None, "always": True, "never": False}[args.family],
     )
     if args.json:
         print(diagnosis.to_json())

@@ -374,6 +374,15 @@ def _diagnose(commands) -> None:
         help="look for at most N causes, one per round, each round with the causes "
         "named before in the model (default: 3; 1 stops after the first cause)",
     )
+    how.add_argument(
+        "--family",
+        choices=("auto", "always", "never"),
+        default="auto",
+        help="fit the other base models (integrated, five-element, burgers, "
+        "bouc-wen, findley) on the same split and go on with the one the data want: "
+        "auto (default) when the base is far from the data (held-out RMSE >= 10 x "
+        "the noise, residual systematic), always, or never",
+    )
     _add_drive_option(diag, "of each test (fixed for every fold and candidate)")
     _add_solver_options(diag, starts=1)
 
