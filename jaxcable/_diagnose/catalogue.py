@@ -37,7 +37,21 @@ def score_catalogue(
         starts = [
             stack.model(m, ext_id) for m in [model, *(r.model for r in base.score.fits)]
         ]
-        scored, note = _score_at_reference(plan, base, ext_id, starts, losses)
+        try:
+            scored, note = _score_at_reference(plan, base, ext_id, starts, losses)
+        except ValueError as first:
+            # The start given fails on a test (a base of another family, a start
+            # outside the extension's domain): from the fitted base alone.
+            try:
+                starts = [starts[1], *starts[1:]]
+                scored, note = _score_at_reference(plan, base, ext_id, starts, losses)
+            except ValueError:
+                reason = f"its fit failed: {str(first).splitlines()[0]}"
+                out.append(Candidate.not_applicable(ext_id, cls, reason, plan.how.unit))
+                continue
+            note = (
+                note + "; " if note else ""
+            ) + "from the fitted base (the start fails)"
         result = scored.fits[0]
         out.append(
             scored_candidate(
