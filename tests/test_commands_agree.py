@@ -133,9 +133,13 @@ def test_diagnose_accepts_the_export(export):
     _, path, start = export
     argv = ["diagnose", path, *FAST, "--params", start, "--drive", "elongation"]
     argv += ["--max-rounds", "1", "--candidates", "sensor_drift", "--quiet", "--json"]
-    status, stdout, stderr = _run(argv)
+    status, stdout, stderr = _run([*argv, "--family", "never"])
     assert status == 0, stderr
-    assert json.loads(stdout)["verdict"]
+    out = json.loads(stdout)
+    assert out["verdict"]
+    # --family never reaches the diagnosis: no other family fitted, and it says so.
+    assert out["family"]["chosen"] == "burgers" and not out["family"]["switched"]
+    assert "switched off" in out["family"]["reason"]
 
 
 def test_design_accepts_the_export_with_a_default_duration(export, tmp_path):
