@@ -1,9 +1,10 @@
 """The real-data regression set: `jaxcable fit`, then `jaxcable diagnose --json`, on
 every record of tests/data/real/records.json, as a user types them.
 
-Each record runs through the command line's entry point (`jaxcable.cli.main`, in this
-process, so that records of one length share compiled programs) with the options its
-entry states. Per record: the verdict, the named causes, the held-out RMSE of the final
+Each record runs through the command line's entry point (`jaxcable.cli.main`), `fit`
+and `diagnose` in one fresh process per record (`--in-process`: all in this one), with
+the options its entry states (`--full`: with the diagnosis's family check, which the
+records skip for the suite's budget). Per record: the verdict, the named causes, the held-out RMSE of the final
 model and of the base, their unit, the noise and where it came from (`noise_source`,
 when the diagnosis reports one), the seconds `fit` and `diagnose` took together, and
 the error: None, or the message the command printed when it refused (its last line on
@@ -27,6 +28,7 @@ import math
 import os
 import pathlib
 import platform
+import subprocess
 import sys
 import tempfile
 import time
@@ -165,6 +167,43 @@ def run_record(record):
     return outcome
 
 
+def run_apart(record, full=False):
+    """[`run_record`][] in a fresh Python process, as a user runs the commands: a
+    long process that compiles program after program can run out of the memory
+    maps its compiled code takes (LLVM: "Unable to allocate section memory").
+
+    **Arguments:**
+
+    - `record`: an entry of records.json.
+    - `full`: run the diagnosis with its family check (without the record's
+        `--family never`).
+
+    **Returns:** its outcome, as `run_record`'s.
+    """
+    with tempfile.TemporaryDirectory() as folder:
+        out = pathlib.Path(folder) / "outcome.json"
+        argv = [sys.executable, str(pathlib.Path(__file__).resolve())]
+        argv += ["--records", record["id"], "--in-process", "--json-out", str(out)]
+        argv += ["--full"] if full else []
+        done = subprocess.run(argv, capture_output=True, text=True, check=False)
+        if done.returncode != 0 or not out.exists():
+            raise RuntimeError(
+                f"{record['id']}: the benchmark's process failed "
+                f"(exit {done.returncode}): {done.stderr[-2000:]}"
+            )
+        (outcome,) = json.loads(out.read_text(encoding="utf-8"))["outcomes"]
+    return outcome
+
+
+def without_family_switch(record):
+    """`record` with its diagnosis's `--family never` removed (the default check)."""
+    options = list(record.get("diagnose_options", []))
+    while "--family" in options:
+        i = options.index("--family")
+        del options[i : i + 2]
+    return {**record, "diagnose_options": options}
+
+
 def _relative(arg):
     path = pathlib.Path(arg)
     if path.is_absolute() and ROOT in path.parents:
@@ -275,6 +314,17 @@ def main(argv=None):
         help="a document of an earlier run (another version of the library): its "
         "verdicts in the table's 'before' column",
     )
+    parser.add_argument(
+        "--full",
+        action="store_true",
+        help="diagnose with the family check (drop the records' --family never, "
+        "which keeps the suite's budget; several minutes a record)",
+    )
+    parser.add_argument(
+        "--in-process",
+        action="store_true",
+        help="run the records in this process (by default each in its own)",
+    )
     args = parser.parse_args(argv)
 
     if args.from_json:
@@ -290,7 +340,11 @@ def main(argv=None):
             records = [r for r in records if r["id"] in wanted]
         outcomes = []
         for record in records:
-            outcomes.append(run_record(record))
+            if args.in_process:
+                full = without_family_switch(record) if args.full else record
+                outcomes.append(run_record(full))
+            else:
+                outcomes.append(run_apart(record, full=args.full))
             print(line(outcomes[-1]), flush=True)
         document = {
             "machine": {"python": platform.python_version(), "cpus": os.cpu_count()},

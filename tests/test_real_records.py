@@ -1,5 +1,5 @@
 """The real-data regression set (tests/data/real/): every record runs through
-`jaxcable fit` and `jaxcable diagnose --json` on the command line (in this process,
+`jaxcable fit` and `jaxcable diagnose --json` on the command line (in a fresh process per record,
 through `jaxcable.cli.main`) and is held to its recorded outcome
 (tests/data/real/outcomes.json, written by `benchmarks/real_records.py
 --write-outcomes`): no refusal, a noise estimate finite, positive and within the
@@ -58,7 +58,9 @@ def test_record_no_worse_than_recorded(record, recorded):
             f"{record['id']} has no recorded outcome: run "
             "`python benchmarks/real_records.py --write-outcomes`"
         )
-    outcome = real_records.run_record(record)
+    # In a process of its own, as a user runs the commands (and a long process that
+    # compiles program after program can run out of memory maps).
+    outcome = real_records.run_apart(record)
     assert outcome["error"] is None, (
         f"{outcome['command']} refused (exit {outcome['status']}): {outcome['error']}"
     )
