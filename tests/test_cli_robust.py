@@ -263,7 +263,11 @@ def test_output_equal_to_input_is_refused(tmp_path, capsys):
         capsys,
         "--report",
     )
-    _refused(["diagnose", data, "--report", tmp_path, "--params", params], capsys)
+    # A report folder that holds the inputs, none of them named as a report file:
+    # written beside them (the inputs are checked unchanged below).
+    argv = ["diagnose", data, "--report", tmp_path, "--params", params, "--quiet"]
+    assert main([str(a) for a in argv]) == 0
+    capsys.readouterr()
     (tmp_path / "summary.md").write_text("{}")
     argv = ["diagnose", data, "--report", tmp_path, "--params", tmp_path / "summary.md"]
     _refused(argv, capsys, "--report")
