@@ -1,9 +1,13 @@
+import contextlib
+import io
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 import jaxcable as jc
+from jaxcable.cli import main
 
 
 # Park's 3 mm cable, 300 mm long, and the default (SK78) integrated model.
@@ -81,3 +85,27 @@ def humidity_history(seed: int, samples: int = 150):
     knots = np.array([0, 600, 900, 1500, 1800, 2300, 2600, 3000]) + 50 * seed
     humidity = np.interp(time, knots, [50, 50, 80, 80, 50, 50, 85, 85])
     return time, force, humidity
+
+
+def run_cli(argv):
+    """`jaxcable` with `argv`, in this process, stdout and stderr captured:
+    `(status, stdout, stderr)`."""
+    stdout, stderr = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
+        status = main([str(a) for a in argv])
+    return status, stdout.getvalue(), stderr.getvalue()
+
+
+def creep_recovery_protocol(force):
+    """A short force-controlled history: one cycle to `force` (N), then twice a
+    creep hold (1 h in two parts) and a recovery (2 h at 0 N); a blocked time split
+    holds out the repeat."""
+    block = jc.Protocol.concatenate(
+        jc.Protocol.ramp(0.0, force, 10),
+        jc.Protocol.hold(force, 600.0, 5),
+        jc.Protocol.hold(force, 3000.0, 6),
+        jc.Protocol.ramp(force, 0.0, 10),
+        jc.Protocol.rest(600.0, 5),
+        jc.Protocol.rest(6600.0, 6),
+    )
+    return jc.Protocol.concatenate(jc.Protocol.cycles(force, 1, 10), block, block)

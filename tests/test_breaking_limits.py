@@ -5,8 +5,6 @@ load; with neither, there is none (the Dyneema default must not stop another
 material); a cable read without a breaking load does not inherit the 3 mm rope's
 2000 N."""
 
-import contextlib
-import io
 import json
 import math
 
@@ -14,7 +12,8 @@ import numpy as np
 import pytest
 
 import jaxcable as jc
-from jaxcable.cli import main
+
+from .helpers import run_cli as _run
 
 
 # Burgers parameters pinned here (not the library defaults). Held at 100 N on the
@@ -25,14 +24,6 @@ AREA = math.pi * 3e-3**2 / 4
 # One history shape for every simulation here, so that it compiles once.
 TIME = np.concatenate([np.linspace(0.0, 10.0, 6), 10.0 + np.geomspace(1.0, 2000.0, 15)])
 FORCE = np.minimum(TIME / 10.0, 1.0) * PEAK_N
-
-
-def _run(argv):
-    """main(argv) with stdout and stderr captured: (status, stdout, stderr)."""
-    stdout, stderr = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
-        status = main([str(a) for a in argv])
-    return status, stdout.getvalue(), stderr.getvalue()
 
 
 def _history(path, force=FORCE, **metadata):

@@ -16,6 +16,8 @@ from jaxcable._models import BY_CLI_NAME
 from jaxcable._papers import synthetic as _synthetic
 from jaxcable.cli import main
 
+from .helpers import run_cli as _run
+
 
 # One load-unload-reload history; every simulate test uses this length so that the
 # force kernel compiles once.
@@ -377,14 +379,6 @@ def _synthetic_tests(model, seed=0):
             )
         )
     return tests
-
-
-def _run(argv):
-    """main(argv) with stdout and stderr captured: (status, stdout, stderr)."""
-    stdout, stderr = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
-        status = main([str(a) for a in argv])
-    return status, stdout.getvalue(), stderr.getvalue()
 
 
 @pytest.fixture(scope="module")

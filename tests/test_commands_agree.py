@@ -4,8 +4,6 @@ whose load cell reads a little below zero at rest is accepted by `fit`, `simulat
 below zero is refused by each, naming file, line and column, where the force drives
 the model."""
 
-import contextlib
-import io
 import json
 import math
 import re
@@ -14,7 +12,8 @@ import numpy as np
 import pytest
 
 import jaxcable as jc
-from jaxcable.cli import main
+
+from .helpers import run_cli as _run
 
 
 # A 0.34 mm fibre, 13 mm long, stretched to 0.15 mm and held (relaxation), with
@@ -64,14 +63,6 @@ def _bluehill(path, t, e, f, extra=()):
     lines += [f'"{a:.5f}","{b:.5f}","{c:.5f}"' for a, b, c in zip(t, e, f)]
     path.write_bytes(("\r\n".join(lines) + "\r\n").encode())
     return path
-
-
-def _run(argv):
-    """main(argv) with stdout and stderr captured: (status, stdout, stderr)."""
-    stdout, stderr = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
-        status = main([str(a) for a in argv])
-    return status, stdout.getvalue(), stderr.getvalue()
 
 
 @pytest.fixture(scope="module")

@@ -2,9 +2,7 @@
 kernel, each equal to its own `jaxcable.fit`; a failing specimen leaves the others;
 arguments checked at the boundary; `jaxcable fit --each`."""
 
-import contextlib
 import csv
-import io
 import math
 
 import equinox as eqx
@@ -12,7 +10,8 @@ import numpy as np
 import pytest
 
 import jaxcable as jc
-from jaxcable.cli import main
+
+from .helpers import run_cli as _run
 
 
 NAMES = ("E1", "eta0", "E2", "eta2")
@@ -161,13 +160,6 @@ def test_a_malformed_specimen_is_named():
     ]
     with pytest.raises(ValueError, match=r"`specimens\[1\]`.*fitted samples"):
         jc.fit_each(START, [SPECIMENS[0], short], fit=NAMES)
-
-
-def _run(argv):
-    stdout, stderr = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
-        status = main([str(a) for a in argv])
-    return status, stdout.getvalue(), stderr.getvalue()
 
 
 def test_cli_fit_each(tmp_path):

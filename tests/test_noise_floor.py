@@ -12,23 +12,13 @@ import jaxcable as jc
 from jaxcable._diagnose.noise import channel_noise, grid_step, white_part
 from jaxcable._papers.synthetic import hidden_effect_model
 
+from .helpers import creep_recovery_protocol
+
 
 TRUTH = hidden_effect_model(None, seed=5)
 SIGMA = 5e-6
 # Samples per interval of the simulation on the resampled grid.
 FINER = 4
-
-
-def _protocol(force):
-    block = jc.Protocol.concatenate(
-        jc.Protocol.ramp(0.0, force, 10),
-        jc.Protocol.hold(force, 600.0, 5),
-        jc.Protocol.hold(force, 3000.0, 6),
-        jc.Protocol.ramp(force, 0.0, 10),
-        jc.Protocol.rest(600.0, 5),
-        jc.Protocol.rest(6600.0, 6),
-    )
-    return jc.Protocol.concatenate(jc.Protocol.cycles(force, 1, 10), block, block)
 
 
 def _records(sigma: float, smoothing: float = 0.0):
@@ -40,7 +30,7 @@ def _records(sigma: float, smoothing: float = 0.0):
     tests, errors = [], []
     for length, force in ((100.0, 120.0), (200.0, 160.0), (300.0, 80.0)):
         cable = jc.Cable(length=length * 1e-3, speed=3e-3 / 60)
-        traj = jc.simulate_rate_test(TRUTH, cable, _protocol(force))
+        traj = jc.simulate_rate_test(TRUTH, cable, creep_recovery_protocol(force))
         t0, f0, e0 = (
             np.asarray(a, float) for a in (traj.time, traj.force, traj.elongation)
         )

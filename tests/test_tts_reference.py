@@ -14,6 +14,8 @@ import jaxcable as jc
 from jaxcable._diagnose import heldout_rmse
 from jaxcable._papers.synthetic import hidden_effect_model, synthesize
 
+from .helpers import creep_recovery_protocol
+
 
 ACTIVATION = 60e3
 # (offset from the reference K, length mm, force N): lengths and forces balanced
@@ -24,20 +26,6 @@ DESIGN = (
     (3.0, 300.0, 80.0),
     (8.0, 200.0, 120.0),
 )
-
-
-def _protocol(force):
-    """A short history: one cycle, then twice a creep hold and a recovery (the
-    repeat is held out)."""
-    block = jc.Protocol.concatenate(
-        jc.Protocol.ramp(0.0, force, 10),
-        jc.Protocol.hold(force, 600.0, 5),
-        jc.Protocol.hold(force, 3000.0, 6),
-        jc.Protocol.ramp(force, 0.0, 10),
-        jc.Protocol.rest(600.0, 5),
-        jc.Protocol.rest(6600.0, 6),
-    )
-    return jc.Protocol.concatenate(jc.Protocol.cycles(force, 1, 10), block, block)
 
 
 def _dataset(reference_c: float):
@@ -58,7 +46,7 @@ def _dataset(reference_c: float):
             synthesize(
                 truth,
                 cable,
-                _protocol(force),
+                creep_recovery_protocol(force),
                 seed=700 + i,
                 temperature_C=temp,
                 temperature_swing_C=0.0,
