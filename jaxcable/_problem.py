@@ -1,0 +1,204 @@
+"""What an analysis of measured data is about ([`jaxcable.Problem`][]), and how the
+least-squares fit solves it ([`jaxcable.LeastSquares`][]).
+
+Every analysis of measured data ([`jaxcable.fit`][], [`jaxcable.fit_each`][],
+[`jaxcable.sample_posterior`][], [`jaxcable.diagnose`][], [`jaxcable.design_test`][])
+takes a `Problem` first and a method second, as optimistix's
+`least_squares(fn, solver, y0)` takes its solver: each fact is given once.
+"""
+
+import math
+import os
+from collections.abc import Mapping, Sequence
+
+import equinox as eqx
+import optimistix as optx
+from jaxtyping import PRNGKeyArray
+
+from ._io import TestData
+from ._models import AbstractCableModel
+
+
+def _as_tests(tests) -> tuple[TestData, ...]:
+    if isinstance(tests, TestData):
+        return (tests,)
+    if tests is None or isinstance(tests, (str, bytes, os.PathLike)):
+        return tests  # refused with its name by __check_init__
+    try:
+        return tuple(tests)
+    except TypeError:
+        return tests
+
+
+def _as_names(names) -> tuple[str, ...] | None:
+    if names is None or isinstance(names, str):
+        return names  # a lone string is refused by __check_init__
+    try:
+        return tuple(names)
+    except TypeError:
+        return names
+
+
+def _as_transforms(transforms) -> tuple[tuple[str, str], ...]:
+    # A sorted tuple of pairs: hashable, so that a Problem's static part can key a
+    # compiled program.
+    if transforms is None:
+        return ()
+    if isinstance(transforms, Mapping):
+        return tuple(sorted(transforms.items()))
+    return transforms
+
+
+def _as_drive(drive):
+    if drive is None or isinstance(drive, str) or not isinstance(drive, Sequence):
+        return drive
+    return tuple(drive)
+
+
+class Problem(eqx.Module):
+    """What an analysis of measured data is about: a model, the tests it is to
+    explain, and which of its parameters the data are to determine.
+
+    ```python
+    problem = jc.Problem(jc.BurgersModel(), tests)
+    result = jc.fit(problem)  # jc.LeastSquares() by default
+    ```
+
+    **Fields:**
+
+    - `model`: any [`jaxcable.AbstractCableModel`][] with scalar parameters: the
+        start values of the fitted parameters and the values of the others.
+    - `tests`: the [`jaxcable.TestData`][] to explain (one, or a sequence of them),
+        with elongation and `length_mm` metadata; a test's `mask` excludes samples
+        from the residuals.
+    - `fit`: names of the parameters to fit; `None` (default) the model's
+        identifiable set where the registry declares one (`IntegratedModel`:
+        `PARK_IDENTIFIABLE`), else all inexact array fields.
+    - `per_test`: names of parameters with one value per test (fitted whether or
+        not they are in `fit`).
+    - `transforms`: {name: `'log'` | `'linear'`} overriding a parameter's
+        reparameterisation (see [`jaxcable.fit`][]); stored as sorted pairs.
+    - `drive`: `"auto"` (default: each test's `metadata['control']`, else detected
+        by [`jaxcable.detect_control`][]), `"force"`, `"elongation"`, a drive
+        ([`jaxcable.FORCE_DRIVEN`][], [`jaxcable.ELONGATION_DRIVEN`][]), or a
+        sequence of these, one per test.
+    - `covariate`: the name of an extra column every test records (humidity, ...),
+        which a covariate extension of `model` reads; `None` when there is none.
+
+    **Raises:**
+
+    `TypeError` or `ValueError` naming the field.
+    """
+
+    model: AbstractCableModel
+    tests: tuple[TestData, ...] = eqx.field(converter=_as_tests)
+    fit: tuple[str, ...] | None = eqx.field(
+        default=None, converter=_as_names, static=True
+    )
+    per_test: tuple[str, ...] = eqx.field(
+        default=(), converter=lambda n: () if n is None else _as_names(n), static=True
+    )
+    transforms: tuple[tuple[str, str], ...] = eqx.field(
+        default=(), converter=_as_transforms, static=True
+    )
+    drive: object = eqx.field(default="auto", converter=_as_drive, static=True)
+    covariate: str | None = eqx.field(default=None, static=True)
+
+    def __check_init__(self):
+        if not isinstance(self.model, AbstractCableModel):
+            raise TypeError(
+                "`model` must be a jaxcable.AbstractCableModel, got "
+                f"{type(self.model).__name__}."
+            )
+        if not isinstance(self.tests, tuple):
+            raise ValueError(
+                "`tests` must be a TestData or a sequence of them (read files with "
+                f"jaxcable.read_test), got {type(self.tests).__name__} {self.tests!r}."
+            )
+        if not self.tests:
+            raise ValueError("`tests` is empty: give at least one TestData.")
+        for i, t in enumerate(self.tests):
+            if not isinstance(t, TestData):
+                raise TypeError(
+                    f"`tests[{i}]` must be a jaxcable.TestData, got {type(t).__name__}."
+                )
+        for name in ("fit", "per_test"):
+            names = getattr(self, name)
+            if names is None and name == "fit":
+                continue
+            if not isinstance(names, tuple) or not all(
+                isinstance(n, str) for n in names
+            ):
+                raise TypeError(
+                    f"`{name}` must be a sequence of parameter names, got {names!r}."
+                )
+        for pair in self.transforms:
+            if (
+                not isinstance(pair, tuple)
+                or len(pair) != 2
+                or pair[1] not in ("log", "linear")
+            ):
+                raise ValueError(
+                    "`transforms` must map parameter names to 'log' or 'linear', "
+                    f"got {self.transforms!r}."
+                )
+        if self.covariate is not None and not isinstance(self.covariate, str):
+            raise TypeError(
+                f"`covariate` must be a column name or None, got {self.covariate!r}."
+            )
+
+    @property
+    def transform_map(self) -> dict[str, str]:
+        """`transforms` as a dict {name: `'log'` | `'linear'`}."""
+        return dict(self.transforms)
+
+
+class LeastSquares(eqx.Module):
+    """The least-squares method of [`jaxcable.fit`][] and [`jaxcable.fit_each`][]:
+    a Gauss-Newton-type solver, restarted from perturbed starts.
+
+    **Fields:**
+
+    - `solver`: an optimistix Gauss-Newton-type least-squares solver
+        (`optx.LevenbergMarquardt`, `optx.GaussNewton`, `optx.Dogleg`, ...); `None`
+        (default) Levenberg-Marquardt with rtol = atol = 1e-6 and textbook
+        trust-region constants.
+    - `max_steps`: solver steps per start (default 256).
+    - `multistart`: number of starts, >= 1 (default 4): the data-scaled start and
+        `multistart - 1` perturbations of it.
+    - `spread`: standard deviation of the start perturbations of the unconstrained
+        parameters (default 0.5: about +-50 % on a log parameter).
+    - `key`: a `jax.random` key for the perturbations; `None` (default)
+        `jax.random.key(0)`, so that a fit is reproducible unless asked otherwise.
+
+    **Raises:**
+
+    `ValueError` naming the field.
+    """
+
+    solver: optx.AbstractGaussNewton | None = None
+    max_steps: int = eqx.field(default=256, static=True)
+    multistart: int = eqx.field(default=4, static=True)
+    spread: float = eqx.field(default=0.5, static=True)
+    key: PRNGKeyArray | None = None
+
+    def __check_init__(self):
+        for name in ("multistart", "max_steps"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ValueError(f"`{name}` must be an int >= 1, got {value!r}.")
+        spread = self.spread
+        if not (
+            isinstance(spread, (int, float))
+            and not isinstance(spread, bool)
+            and spread >= 0
+            and math.isfinite(spread)
+        ):
+            raise ValueError(f"`spread` must be a finite number >= 0, got {spread!r}.")
+        if self.solver is not None and not isinstance(
+            self.solver, optx.AbstractGaussNewton
+        ):
+            raise ValueError(
+                "`solver` must be an optimistix Gauss-Newton-type least-squares "
+                f"solver (optx.LevenbergMarquardt, ...), got {self.solver!r}."
+            )
