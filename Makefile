@@ -19,6 +19,7 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
+	$(BIN)/basedpyright
 	# Two worker processes (pytest-xdist) share the cores, one file (or notebook) at a
 	# time each, the slowest first (tests/conftest.py; --no-loadscope-reorder, or xdist
 	# would order the groups by their number of tests), and one compilation cache. Two
@@ -35,6 +36,7 @@ test-xla-default: $(STAMP)
 lint: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
+	$(BIN)/basedpyright
 
 format: $(STAMP)
 	$(BIN)/ruff check --fix .
