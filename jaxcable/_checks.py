@@ -68,6 +68,96 @@ def require_positive(
     _require(name, v, bad, "non-negative" if allow_zero else "positive")
 
 
+def _is_int(value) -> bool:
+    return isinstance(value, int | np.integer) and not isinstance(
+        value, bool | np.bool_
+    )
+
+
+def _is_number(value) -> bool:
+    return isinstance(value, int | float | np.integer | np.floating) and not isinstance(
+        value, bool | np.bool_
+    )
+
+
+def require_int(
+    name: str, value, low: int | None = None, high: int | None = None
+) -> int:
+    """The one check of a count or an index given at the Python boundary (a field of
+    a method, a reader's option, a command-line flag).
+
+    **Arguments:**
+
+    - `name`: the argument or field, for the message.
+    - `value`: an `int` or NumPy integer (`bool` refused).
+    - `low`, `high`: the inclusive bounds, or `None` for none.
+
+    **Returns:**
+
+    `value` as an `int`.
+
+    **Raises:**
+
+    `TypeError` naming `name` unless `value` is an integer; `ValueError` naming it
+    when it is outside the bounds.
+    """
+    if not _is_int(value):
+        raise TypeError(f"`{name}` must be an integer, got {value!r}.")
+    if low is not None and value < low:
+        raise ValueError(f"`{name}` must be >= {low}, got {value!r}.")
+    if high is not None and value > high:
+        raise ValueError(f"`{name}` must be <= {high}, got {value!r}.")
+    return int(value)
+
+
+def require_number(
+    name: str,
+    value,
+    low: float | None = None,
+    high: float | None = None,
+    *,
+    strict: bool = False,
+) -> float:
+    """The one check of a scalar number given at the Python boundary (a threshold,
+    a frequency, a spread).
+
+    **Arguments:**
+
+    - `name`: the argument or field, for the message.
+    - `value`: an `int`, `float` or NumPy number (`bool` refused).
+    - `low`, `high`: the bounds, or `None` for none; inclusive unless `strict`.
+    - `strict`: whether `value` must exceed `low` (fall below `high`), not equal it.
+
+    **Returns:**
+
+    `value` as a `float`.
+
+    **Raises:**
+
+    `TypeError` naming `name` unless `value` is a number; `ValueError` naming it
+    unless it is finite and within the bounds.
+    """
+    if not _is_number(value):
+        raise TypeError(f"`{name}` must be a number, got {type(value).__name__}.")
+    v = float(value)
+    bounds = []
+    if low is not None:
+        bounds.append((v > low) if strict else (v >= low))
+    if high is not None:
+        bounds.append((v < high) if strict else (v <= high))
+    if not (np.isfinite(v) and all(bounds)):
+        parts = ["finite"]
+        if low is not None:
+            parts.append(f"{'>' if strict else '>='} {low:g}")
+        if high is not None:
+            parts.append(f"{'<' if strict else '<='} {high:g}")
+        kind = (
+            ", ".join(parts[:-1]) + " and " + parts[-1] if len(parts) > 1 else "finite"
+        )
+        raise ValueError(f"`{name}` must be {kind}, got {value!r}.")
+    return v
+
+
 def require_samples(name: str, value, ndim: int = 1) -> np.ndarray:
     v = np.asarray(value)
     if v.ndim != ndim:

@@ -10,6 +10,7 @@ from .csv import (
     write_csv as write_csv,
 )
 from .json_file import parse_json as parse_json, read_json as read_json
+from .options import METADATA_KEYS as METADATA_KEYS, ReadOptions as ReadOptions
 from .preamble import MetadataConflictWarning as MetadataConflictWarning
 from .protocol_file import ProtocolFile as ProtocolFile, read_protocol as read_protocol
 from .raw import read_test as read_test

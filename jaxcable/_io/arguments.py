@@ -6,10 +6,11 @@ length, from the file's or the caller's metadata."""
 
 import math
 import os
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
+from .._checks import require_number
 from .parsing import ColumnMap
 from .testdata import where
 from .units import IGNORE
@@ -46,30 +47,22 @@ def check_flag(value, argument: str) -> None:
         raise TypeError(f"`{argument}` must be True or False, got {value!r}.")
 
 
-def check_threshold(value, argument: str) -> None:
-    """`TypeError`/`ValueError` unless `value` is `None` or a finite number >= 0."""
+def check_threshold(value, argument: str, *, positive: bool = False) -> None:
+    """`TypeError`/`ValueError` unless `value` is `None` or a finite number >= 0
+    (> 0 with `positive`)."""
     if value is None:
         return
     if not _is_number(value):
         raise TypeError(
             f"`{argument}` must be a number or None, got {type(value).__name__}."
         )
-    if not (math.isfinite(float(value)) and float(value) >= 0):
-        raise ValueError(f"`{argument}` must be finite and >= 0, got {value!r}.")
+    require_number(argument, value, 0, strict=positive)
 
 
-def check_read_arguments(
-    path,
-    columns,
-    skip_rows,
-    metadata: dict,
-    encoding,
-    delimiter,
-    detect_slack,
-    slack_threshold_N,
-) -> None:
+def check_read_arguments(path, columns, metadata, keys: Sequence[str]) -> dict:
     """Check the arguments of [`jaxcable.read_test`][] whose checks need no file
-    (the metadata values are checked against the file's by `merge`)."""
+    (the metadata values are checked against the file's by `merge`); return the
+    given metadata (`keys` only, `None` values left out)."""
     check_path(path)
     if columns is not None:
         if isinstance(columns, str):
@@ -83,30 +76,31 @@ def check_read_arguments(
             )
         if not columns or (isinstance(columns, str) and not columns.strip()):
             raise ValueError("`columns` must name the file's columns, got none.")
-    if skip_rows is not None and (
-        isinstance(skip_rows, bool) or not isinstance(skip_rows, int | np.integer)
-    ):
-        raise TypeError(f"`skip_rows` must be an integer or None, got {skip_rows!r}.")
-    if skip_rows is not None and skip_rows < 0:
-        raise ValueError(f"`skip_rows` must be >= 0, got {skip_rows}.")
-    for key in ("material", "id"):
-        if metadata.get(key) is not None and not isinstance(metadata[key], str):
-            raise TypeError(
-                f"`{key}` must be a string or None, got {type(metadata[key]).__name__}."
+    if metadata is None:
+        return {}
+    if not isinstance(metadata, Mapping):
+        raise TypeError(
+            "`metadata` must be a mapping such as {'length_mm': 300} or None, got "
+            f"{type(metadata).__name__}."
+        )
+    for key in metadata:
+        if key not in keys:
+            raise ValueError(
+                f"`metadata` names {key!r}, which is not one of {', '.join(keys)}."
             )
-    for key, value in metadata.items():
-        if key not in ("material", "id") and value is not None:
-            # A string is parsed as the file's values are (`"14.33"`).
-            if not (_is_number(value) or isinstance(value, str)):
+    given = {key: value for key, value in metadata.items() if value is not None}
+    for key, value in given.items():
+        if key in ("material", "id"):
+            if not isinstance(value, str):
                 raise TypeError(
-                    f"`{key}` must be a number or None, got {type(value).__name__}."
+                    f"`{key}` must be a string or None, got {type(value).__name__}."
                 )
-    check_optional_text(encoding, "encoding")
-    if encoding is not None and not encoding.strip():
-        raise ValueError("`encoding` must name an encoding, got ''.")
-    check_optional_text(delimiter, "delimiter")
-    check_flag(detect_slack, "detect_slack")
-    check_threshold(slack_threshold_N, "slack_threshold_N")
+        # A string is parsed as the file's values are (`"14.33"`).
+        elif not (_is_number(value) or isinstance(value, str)):
+            raise TypeError(
+                f"`{key}` must be a number or None, got {type(value).__name__}."
+            )
+    return given
 
 
 def _area_mm2(metadata: dict) -> float | None:

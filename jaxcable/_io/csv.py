@@ -89,9 +89,13 @@ def read_canonical(
         )
     names = [cell.strip() for cell in split_cells(lines[header], ",")]
     if raw and not any(name in COLUMNS for name in names):
-        from .raw import read_test  # the raw reader builds on this module's parser
+        # The raw reader builds on this module's parser.
+        from .options import ReadOptions
+        from .raw import read_test
 
-        return read_test(path, detect_slack=False, **overrides)
+        return read_test(
+            path, metadata=overrides, options=ReadOptions(detect_slack=False)
+        )
     for key, value in overrides.items():
         metadata[key] = metadata_value(key, value, f"{path}, argument {key}")
     header_line = header + 1

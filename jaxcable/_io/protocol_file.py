@@ -206,28 +206,168 @@ class _Reader:
         return int(value)
 
 
-def read_protocol(path: str | os.PathLike) -> ProtocolFile:
-    """Read a rate-driven protocol file (the JSON schema of this module's docstring).
+class _Builder:
+    """The protocol as its segments are read: the samples so far, the force the last
+    segment ends at, and the limits of the cable it runs on."""
 
-    **Arguments:**
+    def __init__(self, cable: Cable, diameter_mm: float):
+        self.breaking = float(cable.breaking_load)
+        self.strongest = _MAX_STRESS_PA * float(cable.area)
+        self.diameter_mm = diameter_mm
+        self.parts = [Protocol.start()]
+        self.starts: list[int] = []
+        self.num_samples = 1
+        self.force = 0.0  # the force the previous segment ends at, N
 
-    - `path`: the `.json` file.
+    def force_value(self, reader: _Reader, key: str, default=None) -> float:
+        if default is not None and key not in reader.obj:
+            return default
+        value = reader.number(key, "N", allow_zero=True)
+        if value > self.breaking:
+            raise reader.error(
+                key,
+                f"{value:g} N exceeds the cable's breaking load ({self.breaking:g} N).",
+            )
+        if value > self.strongest:
+            raise reader.error(
+                key,
+                f"{value:g} N on a {self.diameter_mm:g} mm cable is a stress above "
+                f"{_MAX_STRESS_PA / 1e9:g} GPa (no polymer fibre holds it).",
+            )
+        return value
 
-    **Returns:**
+    @staticmethod
+    def ramp_samples(reader: _Reader, key: str, start: float, end: float, n: int):
+        if abs(end - start) / n < _MIN_FORCE_STEP_N:
+            raise reader.error(
+                key,
+                f"{start:g} to {end:g} N in {n} samples is less than "
+                f"{_MIN_FORCE_STEP_N:g} N a sample (time stamps must increase).",
+            )
+        return n
 
-    A `ProtocolFile`: the [`jaxcable.Protocol`][], the [`jaxcable.Cable`][] and the
-    metadata for the output file.
+    def room(self, reader: _Reader, key: str, wanted: int) -> None:
+        # Checked before the segment is built: a huge one would not fit in memory.
+        if self.num_samples + wanted > MAX_SAMPLES:
+            raise reader.error(
+                key,
+                f"the protocol would have {self.num_samples + wanted:,} samples, "
+                f"more than {MAX_SAMPLES:,}; split it into several files.",
+            )
 
-    **Raises:**
+    def add(self, segment_parts: list[Protocol]) -> None:
+        self.starts.append(self.num_samples)
+        self.num_samples += sum(p.num_samples for p in segment_parts)
+        self.parts.extend(segment_parts)
 
-    `ValueError` naming the file and the key (e.g. `segments[2].force_max_N`) of the
-    first problem: invalid JSON (with its line and column), a missing or unknown key,
-    a value that is not a positive number or count, a segment that does not follow on
-    from the force the previous one ends at, or a force above the cable's breaking
-    load; naming the file when it cannot be read or is not UTF-8 text.
-    """
-    path = str(path)
-    doc = read_json(path, "a protocol file")
+    def cycles(self, r: _Reader) -> list[Protocol]:
+        cycles = r.count("cycles", 1)
+        if cycles > MAX_CYCLES:
+            raise r.error("cycles", f"{cycles:,} is more than {MAX_CYCLES:,}.")
+        high = self.force_value(r, "force_max_N")
+        low = self.force_value(r, "force_min_N", 0.0)
+        spr = r.count("samples_per_ramp", _DEFAULT_SAMPLES_PER_RAMP)
+        hold = r.number("peak_hold_s", "s", 0.0, allow_zero=True)
+        if hold > 0:
+            r.duration("peak_hold_s", hold, 1)
+        force = self.force
+        if not high > force:
+            raise r.error(
+                "force_max_N",
+                f"{high:g} N must exceed the force the previous segment ends "
+                f"at ({force:g} N).",
+            )
+        if not low < high:
+            raise r.error(
+                "force_min_N", f"{low:g} N must be below force_max_N ({high:g} N)."
+            )
+        self.ramp_samples(r, "force_max_N", force, high, spr)
+        self.ramp_samples(r, "force_min_N", low, high, spr)
+        self.room(r, "cycles", cycles * (2 * spr + (hold > 0)))
+        peak = [Protocol.hold(high, hold, 1)] if hold > 0 else []
+        down = Protocol.ramp(high, low, spr)
+        segment_parts = [Protocol.ramp(force, high, spr), *peak, down]
+        if cycles > 1:
+            # Every cycle after the first is the same: one, tiled.
+            later = Protocol.concatenate(Protocol.ramp(low, high, spr), *peak, down)
+            segment_parts.append(_repeat(later, cycles - 1))
+        self.force = low
+        return segment_parts
+
+    def ramp(self, r: _Reader) -> list[Protocol]:
+        target = self.force_value(r, "ramp_to_N")
+        samples = r.count("samples", _DEFAULT_RAMP_SAMPLES)
+        force = self.force
+        if target == force:
+            raise r.error(
+                "ramp_to_N",
+                f"the previous segment already ends at {force:g} N; a ramp "
+                "needs another force.",
+            )
+        self.ramp_samples(r, "ramp_to_N", force, target, samples)
+        self.room(r, "samples", samples)
+        self.force = target
+        return [Protocol.ramp(force, target, samples)]
+
+    def hold(self, r: _Reader) -> list[Protocol]:
+        force = self.force
+        duration = r.number("hold_s", "s")
+        held = self.force_value(r, "force_N", force)
+        samples = r.count("samples", _DEFAULT_HOLD_SAMPLES)
+        r.duration("hold_s", duration, samples)
+        self.room(r, "samples", samples)
+        if abs(held - force) > _SAME_FORCE * max(1.0, abs(force)):
+            raise r.error(
+                "force_N",
+                f"{held:g} N differs from the force the previous segment ends "
+                f'at ({force:g} N); add {{"ramp_to_N": {held:g}}} before the '
+                "hold.",
+            )
+        return [Protocol.hold(force, duration, samples)]
+
+    def rest(self, r: _Reader, kind: str) -> list[Protocol]:
+        duration = r.number(kind, "h" if kind == "rest_h" else "s")
+        if kind == "rest_h":
+            duration *= 3600.0
+        samples = r.count("samples", _DEFAULT_REST_SAMPLES)
+        r.duration(kind, duration, samples)
+        self.room(r, "samples", samples)
+        if self.force != 0.0:
+            raise r.error(
+                kind,
+                f"a rest is at 0 N but the previous segment ends at {self.force:g} "
+                'N; add {"ramp_to_N": 0} before it.',
+            )
+        return [Protocol.rest(duration, samples)]
+
+
+def _segment_kind(path: str, where: str, segment) -> str:
+    """The kind of `segment` (the key of `_SEGMENTS` naming it), its keys checked."""
+    if not isinstance(segment, dict):
+        raise ValueError(
+            f"{path}, {where}: a segment is a JSON object such as "
+            f'{{"ramp_to_N": 50}}, got {_show(segment)}.'
+        )
+    kinds = [k for k in _SEGMENTS if k in segment]
+    if len(kinds) != 1:
+        found = f"has {', '.join(kinds)}" if kinds else "has none"
+        raise ValueError(
+            f"{path}, {where}: a segment has exactly one of "
+            f"{', '.join(_SEGMENTS)}; this one {found}."
+        )
+    kind = kinds[0]
+    for key in segment:
+        if key != kind and key not in _SEGMENTS[kind]:
+            raise ValueError(
+                f"{path}, {where}.{key}: unknown key for a '{kind}' segment "
+                f"(it takes {', '.join((kind, *_SEGMENTS[kind]))})."
+            )
+    return kind
+
+
+def _top_level(path: str, doc) -> tuple[_Reader, dict[str, float | str]]:
+    """The reader of the file's top-level object and its metadata (the cable's
+    sizes, checked against their ranges, and the strings)."""
     if not isinstance(doc, dict):
         raise ValueError(
             f"{path}: a protocol file is a JSON object with length_mm and segments, "
@@ -254,17 +394,40 @@ def read_protocol(path: str | os.PathLike) -> ProtocolFile:
                 raise top.error(key, f"{_show(doc[key])} is not a string.")
             metadata[key] = doc[key]
     metadata.update(length_mm=length, diameter_mm=diameter, rate_mm_per_min=rate)
+    return top, metadata
+
+
+def read_protocol(path: str | os.PathLike) -> ProtocolFile:
+    """Read a rate-driven protocol file (the JSON schema of this module's docstring).
+
+    **Arguments:**
+
+    - `path`: the `.json` file.
+
+    **Returns:**
+
+    A `ProtocolFile`: the [`jaxcable.Protocol`][], the [`jaxcable.Cable`][] and the
+    metadata for the output file.
+
+    **Raises:**
+
+    `ValueError` naming the file and the key (e.g. `segments[2].force_max_N`) of the
+    first problem: invalid JSON (with its line and column), a missing or unknown key,
+    a value that is not a positive number or count, a segment that does not follow on
+    from the force the previous one ends at, or a force above the cable's breaking
+    load; naming the file when it cannot be read or is not UTF-8 text.
+    """
+    path = str(path)
+    doc = read_json(path, "a protocol file")
+    top, metadata = _top_level(path, doc)
     # A protocol names no material: no strain limit unless the caller gives one
     # (`jaxcable simulate --breaking-strain`), as for a data file without one.
     cable = Cable.from_mm(
-        length_mm=length,
-        diameter_mm=diameter,
-        rate_mm_per_min=rate,
+        length_mm=metadata["length_mm"],
+        diameter_mm=metadata["diameter_mm"],
+        rate_mm_per_min=metadata["rate_mm_per_min"],
         breaking_strain=math.inf,
     )
-    breaking = float(cable.breaking_load)
-    strongest = _MAX_STRESS_PA * float(cable.area)
-
     if "segments" not in doc:
         raise ValueError(
             f"{path}: missing key 'segments' (a list such as "
@@ -273,146 +436,22 @@ def read_protocol(path: str | os.PathLike) -> ProtocolFile:
     segments = doc["segments"]
     if not isinstance(segments, list) or not segments:
         raise top.error("segments", "must be a non-empty list of segment objects.")
-
-    parts = [Protocol.start()]
-    starts = []
-    num_samples = 1
-    force = 0.0  # the force the previous segment ends at, N
-
-    def force_value(reader: _Reader, key: str, default=None) -> float:
-        if default is not None and key not in reader.obj:
-            return default
-        value = reader.number(key, "N", allow_zero=True)
-        if value > breaking:
-            raise reader.error(
-                key, f"{value:g} N exceeds the cable's breaking load ({breaking:g} N)."
-            )
-        if value > strongest:
-            raise reader.error(
-                key,
-                f"{value:g} N on a {diameter:g} mm cable is a stress above "
-                f"{_MAX_STRESS_PA / 1e9:g} GPa (no polymer fibre holds it).",
-            )
-        return value
-
-    def ramp_samples(reader: _Reader, key: str, start: float, end: float, n: int):
-        if abs(end - start) / n < _MIN_FORCE_STEP_N:
-            raise reader.error(
-                key,
-                f"{start:g} to {end:g} N in {n} samples is less than "
-                f"{_MIN_FORCE_STEP_N:g} N a sample (time stamps must increase).",
-            )
-        return n
-
-    def room(reader: _Reader, key: str, wanted: int) -> None:
-        # Checked before the segment is built: a huge one would not fit in memory.
-        if num_samples + wanted > MAX_SAMPLES:
-            raise reader.error(
-                key,
-                f"the protocol would have {num_samples + wanted:,} samples, more "
-                f"than {MAX_SAMPLES:,}; split it into several files.",
-            )
-
+    builder = _Builder(cable, metadata["diameter_mm"])
     for i, segment in enumerate(segments):
         where = f"segments[{i}]"
-        if not isinstance(segment, dict):
-            raise ValueError(
-                f"{path}, {where}: a segment is a JSON object such as "
-                f'{{"ramp_to_N": 50}}, got {_show(segment)}.'
-            )
-        kinds = [k for k in _SEGMENTS if k in segment]
-        if len(kinds) != 1:
-            found = f"has {', '.join(kinds)}" if kinds else "has none"
-            raise ValueError(
-                f"{path}, {where}: a segment has exactly one of "
-                f"{', '.join(_SEGMENTS)}; this one {found}."
-            )
-        kind = kinds[0]
-        for key in segment:
-            if key != kind and key not in _SEGMENTS[kind]:
-                raise ValueError(
-                    f"{path}, {where}.{key}: unknown key for a '{kind}' segment "
-                    f"(it takes {', '.join((kind, *_SEGMENTS[kind]))})."
-                )
+        kind = _segment_kind(path, where, segment)
         r = _Reader(path, where, segment)
         if kind == "cycles":
-            cycles = r.count("cycles", 1)
-            if cycles > MAX_CYCLES:
-                raise r.error("cycles", f"{cycles:,} is more than {MAX_CYCLES:,}.")
-            high = force_value(r, "force_max_N")
-            low = force_value(r, "force_min_N", 0.0)
-            spr = r.count("samples_per_ramp", _DEFAULT_SAMPLES_PER_RAMP)
-            hold = r.number("peak_hold_s", "s", 0.0, allow_zero=True)
-            if hold > 0:
-                r.duration("peak_hold_s", hold, 1)
-            if not high > force:
-                raise r.error(
-                    "force_max_N",
-                    f"{high:g} N must exceed the force the previous segment ends "
-                    f"at ({force:g} N).",
-                )
-            if not low < high:
-                raise r.error(
-                    "force_min_N", f"{low:g} N must be below force_max_N ({high:g} N)."
-                )
-            ramp_samples(r, "force_max_N", force, high, spr)
-            ramp_samples(r, "force_min_N", low, high, spr)
-            room(r, "cycles", cycles * (2 * spr + (hold > 0)))
-            peak = [Protocol.hold(high, hold, 1)] if hold > 0 else []
-            down = Protocol.ramp(high, low, spr)
-            segment_parts = [Protocol.ramp(force, high, spr), *peak, down]
-            if cycles > 1:
-                # Every cycle after the first is the same: one, tiled.
-                later = Protocol.concatenate(Protocol.ramp(low, high, spr), *peak, down)
-                segment_parts.append(_repeat(later, cycles - 1))
-            force = low
+            builder.add(builder.cycles(r))
         elif kind == "ramp_to_N":
-            target = force_value(r, "ramp_to_N")
-            samples = r.count("samples", _DEFAULT_RAMP_SAMPLES)
-            if target == force:
-                raise r.error(
-                    "ramp_to_N",
-                    f"the previous segment already ends at {force:g} N; a ramp "
-                    "needs another force.",
-                )
-            ramp_samples(r, "ramp_to_N", force, target, samples)
-            room(r, "samples", samples)
-            segment_parts = [Protocol.ramp(force, target, samples)]
-            force = target
+            builder.add(builder.ramp(r))
         elif kind == "hold_s":
-            duration = r.number("hold_s", "s")
-            held = force_value(r, "force_N", force)
-            samples = r.count("samples", _DEFAULT_HOLD_SAMPLES)
-            r.duration("hold_s", duration, samples)
-            room(r, "samples", samples)
-            if abs(held - force) > _SAME_FORCE * max(1.0, abs(force)):
-                raise r.error(
-                    "force_N",
-                    f"{held:g} N differs from the force the previous segment ends "
-                    f'at ({force:g} N); add {{"ramp_to_N": {held:g}}} before the '
-                    "hold.",
-                )
-            segment_parts = [Protocol.hold(force, duration, samples)]
+            builder.add(builder.hold(r))
         else:  # rest_h / rest_s
-            duration = r.number(kind, "h" if kind == "rest_h" else "s")
-            if kind == "rest_h":
-                duration *= 3600.0
-            samples = r.count("samples", _DEFAULT_REST_SAMPLES)
-            r.duration(kind, duration, samples)
-            room(r, "samples", samples)
-            if force != 0.0:
-                raise r.error(
-                    kind,
-                    f"a rest is at 0 N but the previous segment ends at {force:g} "
-                    'N; add {"ramp_to_N": 0} before it.',
-                )
-            segment_parts = [Protocol.rest(duration, samples)]
-        starts.append(num_samples)
-        num_samples += sum(p.num_samples for p in segment_parts)
-        parts.extend(segment_parts)
+            builder.add(builder.rest(r, kind))
     return ProtocolFile(
-        protocol=Protocol.concatenate(*parts),
+        protocol=Protocol.concatenate(*builder.parts),
         cable=cable,
         metadata=metadata,
-        segment_starts=tuple(starts),
+        segment_starts=tuple(builder.starts),
     )

@@ -3,14 +3,13 @@ export, whose layout `sniff.py` detects, with the slack stretches masked."""
 
 import dataclasses
 import os
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
+from typing import NamedTuple
 
 import numpy as np
 
 from .arguments import (
-    check_flag,
     check_read_arguments,
-    check_threshold,
     column_notes,
     derive_channels,
     derived_notes,
@@ -18,6 +17,7 @@ from .arguments import (
 from .columns import columns_by_name, parse_columns_spec
 from .cycles import cycles_to_time
 from .loadcell import check_force_sign, correct_load_cell
+from .options import METADATA_KEYS, ReadOptions
 from .parsing import (
     ColumnMap,
     assemble,
@@ -72,26 +72,115 @@ def _text_examples(lines, start: int, sep: str, decimal_comma: bool) -> dict[int
     return found
 
 
+class _Layout(NamedTuple):
+    """Where a file's data are: its columns, the header line they were read from
+    (None: `columns` named them), and the first data row (0-based)."""
+
+    columns: list[ColumnMap]
+    header_line: int | None
+    named_by: str  # "the header" or "columns", for the messages
+    start: int
+    spec: list[ColumnMap] | None  # the columns as given (None: from the header)
+    by_name: bool  # `columns` named header names (`Load=force_kN`)
+
+
+def _separator(lines, first: int, delimiter, path) -> tuple[str, bool]:
+    """The cell separator and whether numbers write a decimal comma: detected, or
+    the `delimiter` given (a decimal comma then detected)."""
+    if delimiter is None:
+        return sniff_separator(lines, first)
+    if not isinstance(delimiter, str) or len(delimiter) != 1 or delimiter in '"\r\n':
+        raise ValueError(
+            f"{path}: delimiter must be one character (not a quote or line "
+            f"break), got {delimiter!r}."
+        )
+    decimal_comma = delimiter != "," and sniff_separator(lines, first) == (
+        delimiter,
+        True,
+    )
+    return delimiter, decimal_comma
+
+
+def _skip_rows(skip_rows: int, lines, path) -> int:
+    if not 0 <= skip_rows < len(lines):
+        raise ValueError(
+            f"{path}: skip_rows={skip_rows} is outside the file's {len(lines)} lines."
+        )
+    return int(skip_rows)
+
+
+def _layout(lines, first: int, cells: tuple[str, bool], columns, options, path):
+    """The file's [`_Layout`][]: from `columns` (file order, or header names), else
+    from its header; the first data row given (`options.skip_rows`) or detected."""
+    sep, decimal_comma = cells
+    skip_rows = options.skip_rows
+    required = ("time", "force") if options.require_force else ("time",)
+    spec = None if columns is None else parse_columns_spec(columns, path, required)
+    by_name, search = None, first
+    if isinstance(spec, dict):
+        # Columns named by their header names: the header is the row holding them,
+        # the data below it.
+        by_name = columns_by_name(lines, first, sep, spec, path)
+        spec, search = by_name[0], by_name[1]
+    if skip_rows is None:
+        start = find_data_start(lines, search, sep, decimal_comma, spec, path)
+    else:
+        start = _skip_rows(skip_rows, lines, path)
+    if by_name is not None:
+        column_map, header_line = by_name
+        named_by = "the header"
+        if skip_rows is None:
+            start = data_below_header(lines, header_line, start, sep)
+    elif spec is None:
+        column_map, header_line = header_columns(
+            lines, first, start, sep, path, required
+        )
+        named_by = "the header"
+        if skip_rows is None:
+            start = data_below_header(lines, header_line, start, sep)
+    else:
+        column_map, header_line = spec, None
+        named_by = "columns"
+        if skip_rows is None:
+            start = data_above(lines, first, start, sep, decimal_comma, spec)
+    return _Layout(column_map, header_line, named_by, start, spec, by_name is not None)
+
+
+def _assemble(lines, layout: _Layout, cells, metadata: dict, options, path):
+    """The [`jaxcable.TestData`][] of the data rows of `layout`, with its notes
+    (columns not read, channels derived, time from cycles), before the load-cell
+    corrections and the slack detection."""
+    sep, decimal_comma = cells
+    start, named_by, spec = layout.start, layout.named_by, layout.spec
+    values, line_numbers = parse_rows(
+        lines, start, layout.columns, path, sep, decimal_comma, named_by
+    )
+    values, line_numbers, column_map, timed = cycles_to_time(
+        values, line_numbers, layout.columns, options.frequency_hz, path
+    )
+    text = _text_examples(lines, start, sep, decimal_comma) if spec is None else None
+    notes = () if layout.by_name else column_notes(column_map, named_by, text)
+    notes += derived_notes(column_map, metadata) if spec is not None else ()
+    notes += timed
+    header_line = layout.header_line
+    column_map = derive_channels(column_map, metadata, path, header_line)
+    data = assemble(path, column_map, values, line_numbers, metadata, header_line)
+    if header_line is not None:
+        # Errors about the data name the columns as the header does (`Load`).
+        data = dataclasses.replace(
+            data, column_names=_header_names(lines[header_line - 1], sep, column_map)
+        )
+    if notes:
+        data = dataclasses.replace(data, notes=notes)
+    return data
+
+
 def read_test(
     path: str | os.PathLike,
-    *,
     columns: str | Sequence[str] | None = None,
-    skip_rows: int | None = None,
-    length_mm: float | None = None,
-    diameter_mm: float | None = None,
-    rate_mm_per_min: float | None = None,
-    temperature_C: float | None = None,
-    material: str | None = None,
-    id: str | None = None,
-    breaking_strain: float | None = None,
-    encoding: str | None = None,
-    delimiter: str | None = None,
-    detect_slack: bool = True,
-    slack_threshold_N: float | None = None,
-    require_force: bool = True,
-    force_sign: int | str = "auto",
-    tare: bool = True,
-    frequency_hz: float | None = None,
+    *,
+    metadata: Mapping[str, float | str | None] | None = None,
+    options: ReadOptions | None = None,
 ) -> TestData:
     """Read one test from a canonical CSV file or a raw tensile-tester export.
 
@@ -101,7 +190,7 @@ def read_test(
         into numbers (a semicolon or tab file may write decimal commas, `1,5`).
     - *Encoding*: UTF-8 (with or without byte-order mark), else GB18030 (GBK), else
         latin-1, so a header in any encoding reads.
-    - *Rows to skip* (`skip_rows`): the lines before the first data row. Detected:
+    - *Rows to skip* (`options.skip_rows`): the lines before the first data row. Detected:
         every row under the header is data (blank and comment lines and a units row
         right under the header aside), so a typo in the first rows (`N/A`, `O.5`, a
         stray separator) is an error, as further down; without a header (`columns`
@@ -145,7 +234,7 @@ def read_test(
         `rate_mm_per_min` (from m, cm, mm, in; mm/min, mm/s, m/min, m/s, in/min);
         a line stating the control mode (`Position control`, `Control mode,Load`,
         `Kraftregelung`) sets `control` to "elongation" or "force".
-    - *Slack* (`detect_slack`): stretches where the force is about zero while the
+    - *Slack* (`options.detect_slack`): stretches where the force is about zero while the
         crosshead moves are masked, and negative forces clipped to 0; see
         [`jaxcable.mask_slack`][] for the rule. The result is in `mask`,
         `force_raw` and `slack_report`. A reading below zero within the load
@@ -170,35 +259,18 @@ def read_test(
         mean; see `jaxcable/_io/cycles.py` for why). Or some columns by their
         header names, `"Machine_Load=force_kN,Machine_N_cycles=cycles"`: the first
         row holding every name is the header, its other columns are not read.
-    - `skip_rows`: the number of lines before the first data row, counted from the
-        top of the file (blank, metadata, preamble, header and unit lines alike);
-        `None` to detect it.
-    - `length_mm`, `diameter_mm`, `rate_mm_per_min`, `temperature_C`, `material`,
-        `id`, `breaking_strain`: metadata that replace the file's (mm, mm, mm/min,
-        °C; the breaking strain dimensionless, `math.inf` for a material that does
-        not break, see [`jaxcable.TestData.cable`][]); where one
-        differs from the file's by more than rounding (0.1 %), a
-        [`jaxcable.MetadataConflictWarning`][] names both (the command line prints
-        it as one line). `length_mm` is required, from the file or here.
-    - `encoding`: the file's encoding, or `None` to detect it.
-    - `delimiter`: the cell separator, or `None` to detect it.
-    - `detect_slack`: whether to detect and mask slack stretches.
-    - `slack_threshold_N`: the slack force threshold, N, or `None` for the default
-        rule.
-    - `force_sign`: `1` (the force as written), `-1` (flipped) or `"auto"`:
-        flipped where the load cell reads tension as negative (the force mostly
-        negative and growing in magnitude as the elongation grows from its start;
-        a compression test is read as written; the default). Rules in `jaxcable/_io/loadcell.py`; each correction is a note.
-    - `tare`: whether a load cell's offset at rest (the force of the first samples,
-        before the elongation moves, constant within the noise) is removed where
-        it is clearly one: a reading below zero at rest, or one the test loads
-        above and, back at the rest elongation, reads below, never reading zero.
-        A preload is kept. Default `True`.
-    - `frequency_hz`: the test frequency, Hz, of a file timed by a cycle count
-        (`cycles` in `columns`); `None` otherwise.
-    - `require_force`: whether the file must have a force column; `False` reads a
-        canonical elongation history (`time_s,elongation_mm`) with NaN forces, for
-        an elongation-driven simulation (no slack detection then).
+    - `metadata`: facts about the test that replace or complete the file's, by
+        their names in the `# key: value` block: `length_mm`, `diameter_mm`,
+        `rate_mm_per_min`, `temperature_C`, `material`, `id`, `breaking_strain`
+        (mm, mm, mm/min, °C; the breaking strain dimensionless, `math.inf` for a
+        material that does not break, see [`jaxcable.TestData.cable`][]); a value
+        `None` is not given. Where one differs from the file's by more than
+        rounding (0.1 %), a [`jaxcable.MetadataConflictWarning`][] names both (the
+        command line prints it as one line). `length_mm` is required, from the
+        file or here.
+    - `options`: how the file is read, a [`jaxcable.ReadOptions`][] (rows to skip,
+        encoding, delimiter, slack detection, load-cell corrections, the
+        frequency of a file timed by cycles); `None` for the defaults.
 
     **Returns:**
 
@@ -206,8 +278,9 @@ def read_test(
 
     **Raises:**
 
-    `TypeError` or `ValueError` naming the argument of a keyword argument of the
-    wrong type or value (`encoding=5`, `skip_rows=-1`); `ValueError` naming the
+    `TypeError` or `ValueError` naming the argument (or the `metadata` key) of a
+    value of the wrong type or value (`columns=3`, `metadata={"length_mm": [1]}`);
+    `ValueError` naming the
     file, the 1-based line and the column (its position and name) of the first
     problem: a missing column or cell, a non-numeric, empty, NaN
     or infinite cell, a value out of range in SI units (`1e306` h), time not
@@ -218,112 +291,26 @@ def read_test(
     is not a finite number the [`jaxcable.Cable`][] accepts, or no `length_mm`; an
     instrument metadata line without a known unit, unless its value is given here.
     """
-    overrides = {
-        "length_mm": length_mm,
-        "diameter_mm": diameter_mm,
-        "rate_mm_per_min": rate_mm_per_min,
-        "temperature_C": temperature_C,
-        "material": material,
-        "id": id,
-        "breaking_strain": breaking_strain,
-    }
-    check_read_arguments(
-        path,
-        columns,
-        skip_rows,
-        overrides,
-        encoding,
-        delimiter,
-        detect_slack,
-        slack_threshold_N,
-    )
-    check_flag(require_force, "require_force")
-    check_flag(tare, "tare")
-    force_sign = check_force_sign(force_sign)
-    check_threshold(frequency_hz, "frequency_hz")
-    if frequency_hz is not None and not frequency_hz > 0:
-        raise ValueError(f"`frequency_hz` must be positive, got {frequency_hz!r}.")
-    required = ("time", "force") if require_force else ("time",)
-    lines = read_lines(path, encoding)
-    metadata, first = parse_metadata(lines, path)
+    if options is None:
+        options = ReadOptions()
+    given = check_read_arguments(path, columns, metadata, METADATA_KEYS)
+    if not isinstance(options, ReadOptions):
+        raise TypeError(
+            "`options` must be a jaxcable.ReadOptions or None, got "
+            f"{type(options).__name__}."
+        )
+    lines = read_lines(path, options.encoding)
+    file_metadata, first = parse_metadata(lines, path)
     given = {
         key: metadata_value(key, value, f"{path}, argument {key}")
-        for key, value in overrides.items()
-        if value is not None
+        for key, value in given.items()
     }
-    if delimiter is None:
-        sep, decimal_comma = sniff_separator(lines, first)
-    else:
-        if (
-            not isinstance(delimiter, str)
-            or len(delimiter) != 1
-            or delimiter in '"\r\n'
-        ):
-            raise ValueError(
-                f"{path}: delimiter must be one character (not a quote or line "
-                f"break), got {delimiter!r}."
-            )
-        sep = delimiter
-        decimal_comma = sep != "," and sniff_separator(lines, first) == (sep, True)
-    spec = None if columns is None else parse_columns_spec(columns, path, required)
-    by_name, search = None, first
-    if isinstance(spec, dict):
-        # Columns named by their header names: the header is the row holding them,
-        # the data below it.
-        by_name = columns_by_name(lines, first, sep, spec, path)
-        spec, search = by_name[0], by_name[1]
-    if skip_rows is None:
-        start = find_data_start(lines, search, sep, decimal_comma, spec, path)
-    else:
-        if isinstance(skip_rows, bool) or not isinstance(skip_rows, int | np.integer):
-            raise ValueError(
-                f"{path}: skip_rows must be an integer, got {skip_rows!r}."
-            )
-        if not 0 <= skip_rows < len(lines):
-            raise ValueError(
-                f"{path}: skip_rows={skip_rows} is outside the file's {len(lines)} "
-                "lines."
-            )
-        start = int(skip_rows)
-    if by_name is not None:
-        column_map, header_line = by_name
-        named_by = "the header"
-        if skip_rows is None:
-            start = data_below_header(lines, header_line, start, sep)
-    elif spec is None:
-        column_map, header_line = header_columns(
-            lines, first, start, sep, path, required
-        )
-        named_by = "the header"
-        if skip_rows is None:
-            start = data_below_header(lines, header_line, start, sep)
-    else:
-        column_map, header_line = spec, None
-        named_by = "columns"
-        if skip_rows is None:
-            start = data_above(lines, first, start, sep, decimal_comma, spec)
-    block = read_block(lines, first, start, sep, decimal_comma)
-    metadata = merge(path, lines, first, metadata, block, given)
-    values, line_numbers = parse_rows(
-        lines, start, column_map, path, sep, decimal_comma, named_by
-    )
-    values, line_numbers, column_map, timed = cycles_to_time(
-        values, line_numbers, column_map, frequency_hz, path
-    )
-    text = _text_examples(lines, start, sep, decimal_comma) if spec is None else None
-    notes = column_notes(column_map, named_by, text) if by_name is None else ()
-    notes += derived_notes(column_map, metadata) if spec is not None else ()
-    notes += timed
-    column_map = derive_channels(column_map, metadata, path, header_line)
-    data = assemble(path, column_map, values, line_numbers, metadata, header_line)
-    if header_line is not None:
-        # Errors about the data name the columns as the header does (`Load`).
-        data = dataclasses.replace(
-            data, column_names=_header_names(lines[header_line - 1], sep, column_map)
-        )
-    if notes:
-        data = dataclasses.replace(data, notes=notes)
-    data = correct_load_cell(data, force_sign, tare)
-    if detect_slack and np.all(np.isfinite(data.force)):
-        data = mask_slack(data, threshold_N=slack_threshold_N)
+    sep, decimal_comma = _separator(lines, first, options.delimiter, path)
+    layout = _layout(lines, first, (sep, decimal_comma), columns, options, path)
+    block = read_block(lines, first, layout.start, sep, decimal_comma)
+    merged = merge(path, lines, first, file_metadata, block, given)
+    data = _assemble(lines, layout, (sep, decimal_comma), merged, options, path)
+    data = correct_load_cell(data, check_force_sign(options.force_sign), options.tare)
+    if options.detect_slack and np.all(np.isfinite(data.force)):
+        data = mask_slack(data, threshold_N=options.slack_threshold_N)
     return data
