@@ -5,7 +5,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 WORKERS ?= 2
 
-.PHONY: demo test test-xla-default lint format bench clean
+.PHONY: demo test test-xla-default lint format bench docs clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -45,5 +45,9 @@ format: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python benchmarks/kernel.py
 
+# The reference site, into site/ (tests/test_docs.py builds it with --strict in `make test`).
+docs: $(STAMP)
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict
+
 clean:
-	rm -rf $(VENV) demo_out .pytest_cache
+	rm -rf $(VENV) demo_out .pytest_cache site

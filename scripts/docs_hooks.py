@@ -68,7 +68,11 @@ def cell(value) -> str:
 
 
 def _is_rows(value) -> bool:
-    return isinstance(value, list) and bool(value) and all(isinstance(v, dict) for v in value)
+    return (
+        isinstance(value, list)
+        and bool(value)
+        and all(isinstance(v, dict) for v in value)
+    )
 
 
 def rows_table(rows: list[dict]) -> list[str]:
@@ -77,7 +81,9 @@ def rows_table(rows: list[dict]) -> list[str]:
     for row in rows:
         columns += [k for k in row if k not in columns]
     lines = ["| " + " | ".join(columns) + " |", "|" + " --- |" * len(columns)]
-    lines += ["| " + " | ".join(cell(row.get(c)) for c in columns) + " |" for row in rows]
+    lines += [
+        "| " + " | ".join(cell(row.get(c)) for c in columns) + " |" for row in rows
+    ]
     return lines
 
 
@@ -161,7 +167,12 @@ def figures_markdown(page_uri: str = "", root: pathlib.Path = ROOT) -> str:
         )
     lines = []
     for path in found:
-        lines += [f"**{path.name}**", "", f"![{path.stem}]({up}{FIGURE_DIR}/{path.name})", ""]
+        lines += [
+            f"**{path.name}**",
+            "",
+            f"![{path.stem}]({up}{FIGURE_DIR}/{path.name})",
+            "",
+        ]
     return "\n".join(lines)
 
 
@@ -172,7 +183,9 @@ def on_files(files, config):
     from mkdocs.structure.files import File
 
     for path in figures():
-        files.append(File.generated(config, f"{FIGURE_DIR}/{path.name}", abs_src_path=str(path)))
+        files.append(
+            File.generated(config, f"{FIGURE_DIR}/{path.name}", abs_src_path=str(path))
+        )
     return files
 
 
@@ -180,7 +193,9 @@ def on_page_markdown(markdown, page, config, files):
     if "<!-- benchmark-results -->" in markdown:
         markdown = markdown.replace("<!-- benchmark-results -->", benchmark_markdown())
     if "<!-- notebook-figures -->" in markdown:
-        markdown = markdown.replace("<!-- notebook-figures -->", figures_markdown(page.file.src_uri))
+        markdown = markdown.replace(
+            "<!-- notebook-figures -->", figures_markdown(page.file.src_uri)
+        )
     return markdown
 
 
