@@ -96,7 +96,7 @@ def step_inputs(test, covariate: str | None) -> dict[str, np.ndarray]:
 
 def library(test, covariate: str | None, names=tuple(TERMS)) -> dict[str, np.ndarray]:
     """Each library term's contribution to the discovered strain per unit theta,
-    eps_k(t) (the cumulative sum of [`term_increments`][] along the test, as
+    eps_k(t) (the cumulative sum of `term_increments` along the test, as
     `DiscoveredTerm.advance` integrates it), host-side.
 
     **Arguments:**
@@ -143,7 +143,7 @@ def memory_library(
 
     **Arguments:**
 
-    - `test`, `covariate`: as in [`library`][].
+    - `test`, `covariate`: as in `library`.
     - `base_strain`: the base model's strain at every sample (a `damage_*` scales
         it; a `compliance_*` scales the stress).
     - `keys`: `(term, rate, accel)` triples ([`MEMORY_TERMS`][] ids; `accel` is

@@ -152,7 +152,7 @@ def residual_structure(
     {covariate: {"tests": how many tests record it, "of": how many tests, "used":
     True when correlated, "note": on which tests, or why it was skipped}}}`. Each
     covariate c (the temperature record, every extra column) gives three features:
-    `c`, `d c/dt` and `|d c/dt|` ([`rate_of_change`][], per s). A covariate some
+    `c`, `d c/dt` and `|d c/dt|` (`rate_of_change`, per s). A covariate some
     tests lack is correlated on the tests that record it, its note says so. Features
     constant over the data (one length, one temperature) have no correlation (None).
     """

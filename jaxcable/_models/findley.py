@@ -8,7 +8,7 @@ a linear viscoelastic solid whose creep compliance J(t) = 1/E0 + (t / t_ref)^n /
 is a power of time. An arbitrary force history is Boltzmann's superposition of that
 compliance, which needs the whole history at every sample. The model runs one
 sample at a time instead, through a retardation spectrum that reproduces t^n over a
-stated time range ([`power_law_terms`][]): a spring, `elements` Kelvin-Voigt elements
+stated time range (`power_law_terms`): a spring, `elements` Kelvin-Voigt elements
 with log-spaced retardation times and a dashpot, each stepped exactly for a force
 linear over the sample.
 """
@@ -103,7 +103,7 @@ class FindleyModel(AbstractCableModel[FindleyState]):
 
     **Per sample.** The power law is carried by a spring, `elements` Kelvin-Voigt
     elements with retardation times log-spaced between `t_short` and `t_long`, and a
-    dashpot ([`power_law_terms`][]); each element is stepped exactly for a stress
+    dashpot (`power_law_terms`); each element is stepped exactly for a stress
     linear over the sample (`jaxcable._models.kernels.retarded`), so the model is
     exact for any force history in which the power law is replaced by its spectrum.
     With the defaults (20 elements over 0.01 s to 1e7 s, 2.2 per decade) the creep
@@ -178,7 +178,7 @@ class FindleyModel(AbstractCableModel[FindleyState]):
         return _checks.domain_result(ok)
 
     def _terms(self):
-        """The spectrum ([`power_law_terms`][]) in compliance units, 1/Pa."""
+        """The spectrum (`power_law_terms`) in compliance units, 1/Pa."""
         spring, weights, taus, fluidity = power_law_terms(
             self.n, self.t_ref, self.t_short, self.t_long, self.elements
         )

@@ -5,9 +5,9 @@
 - Eq. 2, the hardening exponent: [`hardening_exponent`][];
 - Eq. 3, 4 and 7, the creep and its short- and long-term recoveries: three
   delayed-elastic elements that creep fast under load and recover slowly at rest,
-  [`delayed_elastic`][];
+  `delayed_elastic`;
 - Eq. 3's dashpot, over the hours and days a robot runs: a stress-activated (Eyring)
-  flow, [`eyring_rate`][];
+  flow, `eyring_rate`;
 - Eq. 8, the long-term retardation time: `IntegratedModel.retardation_time_long`;
 - Eq. 9, the strain from its terms: `IntegratedModel.advance`.
 
@@ -206,7 +206,7 @@ class IntegratedModel(AbstractCableModel[IntegratedState]):
       on which the cable also reloads (the bedding-in of a braid: the first loading
       sets a permanent constructional elongation F_m (1/E1c - 1/E1r) / A);
     - creep (Park Eq. 3, 4 and 7): three delayed-elastic elements q_k, each relaxing
-      towards F / (E_k A) ([`delayed_elastic`][]), fast while below it (creep, or
+      towards F / (E_k A) (`delayed_elastic`), fast while below it (creep, or
       re-extension after a rest) and slowly while above it (recovery):
       permanent (E2c): creeps with t_c, never recovers;
       short-term (E2r): creeps with t_e, recovers with t_r1 (Eq. 4);
@@ -215,7 +215,7 @@ class IntegratedModel(AbstractCableModel[IntegratedState]):
       Each saturates at F / (E_k A): the primary creep of HMPE is bounded;
     - flow (Park Eq. 3's dashpot): eps_p' = (sigma_a / eta0) sinh(sigma / sigma_a),
       Park's sigma / eta0 at low stress, the stress-activated plateau creep of HMPE
-      fibres above (an Eyring process, [`eyring_rate`][]);
+      fibres above (an Eyring process, `eyring_rate`);
     - eps = e + q_permanent + q_short + q_long + eps_p.
 
     **Properties** (each tested): the strain is continuous in the force history (no

@@ -5,9 +5,9 @@ equation of the paper:
     [`family_step`][];
 - Eq. 2-3, unloading as the superposition of an added negative stress on the
     unloading family, which removes at most what the loading family added (never
-    shorter than new): [`superposed_strain`][];
+    shorter than new): `superposed_strain`;
 
-and Piao's Table 1 ([`PIAO_TABLE1`][]). The parameter surfaces (Eq. 5, Table 3) are in
+and Piao's Table 1 (`PIAO_TABLE1`). The parameter surfaces (Eq. 5, Table 3) are in
 `piao_surface.py`.
 """
 
@@ -331,7 +331,7 @@ class FiveElementModel(AbstractFiveElement):
     more compliant (`docs/model_notes.md` point 10 gives measured numbers).
 
     **Recovery bound.** The unloading family removes at most what the loading family
-    added ([`superposed_strain`][]): its three terms are scaled by
+    added (`superposed_strain`): its three terms are scaled by
     s = min(1, added / removed), so eps = max(added - removed, 0) >= 0 for any L and
     UL sets, and no history leaves the cable shorter than new. With equal sets and a
     non-negative force the bound never acts and the model is the linear solid as
@@ -365,7 +365,7 @@ class FiveElementModel(AbstractFiveElement):
     springs), `creep` = q_L2 + q_L3, `recovery_short` = -s q_UL2, `recovery_long` =
     -s q_UL3, with s the recovery bound's share (1 unless the bound is active).
 
-    **Default parameters.** Loading: Piao Table 1 ([`jaxcable.PIAO_TABLE1`][]),
+    **Default parameters.** Loading: Piao Table 1 (`jaxcable.PIAO_TABLE1`),
     E_L2 = 9.5e9 Pa, E_L3 = 5.0e10 Pa, eta_L2 = 1.0e10 Pa s (tau_2 ~ 1.05 s),
     eta_L3 = 1.0e13 Pa s (tau_3 = 200 s). E_L1 is a function of payload and cable
     length in the paper (Table 3); the default 2.2e14 Pa is the Table 3 surface at
