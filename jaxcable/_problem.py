@@ -69,8 +69,8 @@ class Problem(eqx.Module):
     - `model`: any [`jaxcable.AbstractCableModel`][] with scalar parameters: the
         start values of the fitted parameters and the values of the others.
     - `tests`: the [`jaxcable.TestData`][] to explain (one, or a sequence of them),
-        with elongation and `length_mm` metadata; a test's `mask` excludes samples
-        from the residuals.
+        with elongation and `length_mm` metadata; a test's boolean `mask` (True =
+        fit the sample) excludes samples, e.g. slack, from the residuals.
     - `fit`: names of the parameters to fit; `None` (default) the model's
         identifiable set where the registry declares one (`IntegratedModel`:
         `PARK_IDENTIFIABLE`), else all inexact array fields.
@@ -82,8 +82,11 @@ class Problem(eqx.Module):
         by [`jaxcable.detect_control`][]), `"force"`, `"elongation"`, a drive
         ([`jaxcable.FORCE_DRIVEN`][], [`jaxcable.ELONGATION_DRIVEN`][]), or a
         sequence of these, one per test.
-    - `covariate`: the name of an extra column every test records (humidity, ...),
-        which a covariate extension of `model` reads; `None` when there is none.
+    - `covariate`: the name of an extra column every test records
+        (`test.extra[name]`: humidity, ...), set as `Cable.covariate` at each sample
+        for a covariate-dependent model (a covariate extension,
+        [`jaxcable.DiscoveredTerm`][]); `None` (default) when there is none (0
+        throughout).
 
     **Raises:**
 
@@ -151,6 +154,25 @@ class Problem(eqx.Module):
     def transform_map(self) -> dict[str, str]:
         """`transforms` as a dict {name: `'log'` | `'linear'`}."""
         return dict(self.transforms)
+
+    def with_scaled_start(self) -> "Problem":
+        """The same problem, its model's start values scaled to its tests
+        ([`jaxcable.scaled_start`][] by the problem's drive): a start for a model
+        whose defaults are far from the data (another cable, another material).
+
+        **Returns:**
+
+        This problem with the scaled model.
+
+        **Raises:**
+
+        `ValueError` naming `model` or `tests`, as [`jaxcable.scaled_start`][].
+        """
+        # Imported here: the fit imports this module.
+        from ._fit.start import start_scaling
+
+        model = start_scaling(self.model, self.tests, drive=self.drive).model
+        return eqx.tree_at(lambda p: p.model, self, model)
 
 
 class LeastSquares(eqx.Module):

@@ -7,13 +7,13 @@ from .data import (
 )
 from .each import fit_each as fit_each
 from .exported import cached_fit_kernels as cached_fit_kernels
-from .fit import fit as fit, make_loss as make_loss
+from .fit import fit as fit, fit_tests as fit_tests, make_loss as make_loss
 from .parameters import declared_parameters as declared_parameters, field_at as field_at
 from .problem import (
     make_problem as make_problem,
     residuals as residuals,
 )
-from .responses import model_responses as model_responses
+from .responses import model_responses as model_responses, responses as responses
 from .result import FitResult as FitResult
 from .shared import fit_subset as fit_subset, shared_layout as shared_layout
 from .solver import (

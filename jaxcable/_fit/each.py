@@ -8,7 +8,7 @@ is vmapped over them, so that one compiled program solves them all.
 
 import dataclasses
 import warnings
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 
 import equinox as eqx
 import jax
@@ -17,14 +17,13 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Float, PRNGKeyArray
 
-from .._drive import AbstractTestDrive
-from .._io import TestData
 from .._models import AbstractCableModel
+from .._problem import LeastSquares, Problem
 from .._progress import AbstractProgressMeter, NoProgressMeter, check_progress_meter
 from .._results import RESULTS
-from .data import PaddedTests, as_test_list, pad_tests
-from .fit import _checked_solver, fit_result
-from .problem import Problem, make_problem, require_enough_samples
+from .data import PaddedTests, pad_tests
+from .fit import fit_result, least_squares_solver
+from .problem import ResidualProblem, make_problem, require_enough_samples
 from .result import FitResult, concrete_result
 from .solver import KernelOut, fit_kernel
 from .specimens import (
@@ -38,46 +37,45 @@ from .specimens import (
 from .statistics import IdentifiabilityWarning
 
 
-def _specimen_list(specimens) -> list[list]:
-    """`specimens` as a non-empty list of non-empty test lists.
+def _problem_list(problems) -> list[Problem]:
+    """`problems` as a non-empty list of `Problem`s that share everything but their
+    tests and drives.
 
     **Raises:**
 
-    `ValueError` naming `specimens` (or `specimens[k]`) otherwise.
+    `ValueError` naming `problems` (or `problems[k]`) otherwise.
     """
-    if isinstance(specimens, (str, bytes, TestData)) or not isinstance(
-        specimens, Sequence
-    ):
+    if isinstance(problems, Problem) or not isinstance(problems, Sequence):
         raise ValueError(
-            "`specimens` must be a sequence with one entry per specimen (a list of "
-            f"its tests, or one TestData), got {type(specimens).__name__}."
+            "`problems` must be a sequence with one jaxcable.Problem per specimen, "
+            f"got {type(problems).__name__}."
         )
-    if not specimens:
-        raise ValueError("`specimens` is empty: give at least one specimen to fit.")
-    out = []
-    for k, tests in enumerate(specimens):
-        try:
-            out.append(as_test_list(tests))
-        except ValueError as e:
-            raise ValueError(f"`specimens[{k}]`: {e}") from None
+    if not problems:
+        raise ValueError("`problems` is empty: give at least one problem to fit.")
+    out = list(problems)
+    first = out[0]
+    for k, problem in enumerate(out):
+        if not isinstance(problem, Problem):
+            raise ValueError(
+                f"`problems[{k}]` must be a jaxcable.Problem, got "
+                f"{type(problem).__name__}."
+            )
+        for name in ("fit", "per_test", "transforms", "covariate"):
+            if getattr(problem, name) != getattr(first, name):
+                raise ValueError(
+                    f"`problems[{k}].{name}` is {getattr(problem, name)!r} but "
+                    f"`problems[0].{name}` {getattr(first, name)!r}: the problems "
+                    "of one fit_each share it."
+                )
+        if problem.model is not first.model and not eqx.tree_equal(
+            problem.model, first.model
+        ):
+            raise ValueError(
+                f"`problems[{k}].model` differs from `problems[0].model`: the "
+                "problems of one fit_each share one start model (its structure and "
+                "its values); fit problems of other starts with jaxcable.fit."
+            )
     return out
-
-
-def _drives(drive, n: int) -> list:
-    """One `drive` argument of `jaxcable.fit` per specimen."""
-    if drive is None or isinstance(drive, (str, AbstractTestDrive)):
-        return [drive] * n
-    if not isinstance(drive, Sequence):
-        raise ValueError(
-            '`drive` must be "auto", "force", "elongation", a drive, or a sequence '
-            f"with one of these per specimen, got {type(drive).__name__}."
-        )
-    if len(drive) != n:
-        raise ValueError(
-            f"`drive` gives {len(drive)} entries for {n} specimens; give one drive, "
-            "or one entry per specimen."
-        )
-    return list(drive)
 
 
 def _checked_key(key) -> PRNGKeyArray:
@@ -105,7 +103,7 @@ def _domain(model: AbstractCableModel, cables) -> RESULTS:
 
 @eqx.filter_jit
 def each_kernel(
-    problem: Problem,
+    problem: ResidualProblem,
     data: PaddedTests,
     u_user: Float[Array, " p"],
     key: PRNGKeyArray,
@@ -148,7 +146,7 @@ def _solve_group(
     model: AbstractCableModel,
     group: Group,
     checks: RESULTS,
-    template: Problem,
+    template: ResidualProblem,
     settings: tuple,
     per: tuple[str, ...],
 ) -> list[FitResult]:
@@ -193,7 +191,7 @@ def _template(groups: list[Group], checks: list, drives: list) -> tuple[list, ob
 
     **Raises:**
 
-    `ValueError` naming `model` when there is none.
+    `ValueError` naming `problems` when there is none.
     """
     ok = int(RESULTS.successful._value)
     for group, check in zip(groups, checks):
@@ -201,39 +199,29 @@ def _template(groups: list[Group], checks: list, drives: list) -> tuple[list, ob
             if (np.asarray(check._value)[j] == ok).all():
                 return group.tests[j], drives[k]
     raise ValueError(
-        "`model`: its parameters are outside their domain for a cable of every "
-        "specimen (e.g. Park's t_r2 = lambda1 (L0/v)^2 - lambda2 <= 0); give start "
-        "values valid for the specimens' cables."
+        "`problems`: the start model's parameters are outside their domain for a "
+        "cable of every specimen (e.g. Park's t_r2 = lambda1 (L0/v)^2 - lambda2 "
+        "<= 0); give start values valid for the specimens' cables."
     )
 
 
 def fit_each(
-    model: AbstractCableModel,
-    specimens,
+    problems: Sequence[Problem],
+    method: LeastSquares = LeastSquares(),
     *,
-    fit: Sequence[str] | None = None,
-    per_test: Sequence[str] | None = None,
-    transforms: Mapping[str, str] | None = None,
-    solver: optx.AbstractGaussNewton | None = None,
-    max_steps: int = 256,
-    multistart: int = 4,
-    spread: float = 0.5,
-    key: PRNGKeyArray | None = None,
-    drive="auto",
-    covariate: str | None = None,
     progress_meter: AbstractProgressMeter | None = None,
 ) -> list[FitResult]:
     """Fit one parameter set per specimen, all specimens in one compiled solve.
 
-    Each specimen (a list of tests) is the problem [`jaxcable.fit`][] solves for
-    those tests: the same residuals, data-derived start, multi-start
-    Levenberg-Marquardt and standard errors, from the same start `model`. The
+    Each specimen's [`jaxcable.Problem`][] is the problem [`jaxcable.fit`][] solves:
+    the same residuals, data-derived start, multi-start Levenberg-Marquardt and
+    standard errors, from the same start model. The
     specimens' padded tests are padded further to one length (padding samples
     neither drive the model nor enter the residual) and stacked, and the fit's
     kernel is vmapped over them: one compiled program solves every specimen, each
     with its own steps (the loop runs until the last specimen has converged). Each
-    specimen's parameters equal those of `jaxcable.fit(model, tests, ...)` with the
-    same arguments, up to rounding. Specimens whose tests differ in number or in
+    specimen's parameters equal those of `jaxcable.fit(problem, method)`, up to
+    rounding. Specimens whose tests differ in number or in
     drive are solved by one program per such group.
 
     A specimen that fails does not stop the others: its `FitResult` has NaN values
@@ -241,22 +229,18 @@ def fit_each(
     domain check when the start parameters are outside their domain for one of its
     cables (e.g. `parameter_out_of_domain`), the simulation's member when the start
     does not simulate on one of its tests (where `jaxcable.fit` raises), else the
-    solver's result as with `jaxcable.fit(..., throw=False)` (e.g.
+    solver's result as with `jaxcable.fit(problem, method, throw=False)` (e.g.
     `nonlinear_max_steps_reached`, `every_start_failed`). Identifiability warnings
     are kept in each result's `warnings`, and one
     [`jaxcable.IdentifiabilityWarning`][] names the specimens that have any.
 
     **Arguments:**
 
-    - `model`: the start model of every specimen, as in [`jaxcable.fit`][].
-    - `specimens`: a sequence with one entry per specimen: its tests, as
-        `jaxcable.fit` takes them (a [`jaxcable.TestData`][] or a list of them).
-    - `fit`, `per_test`, `transforms`, `solver`, `max_steps`, `multistart`,
-        `spread`, `covariate`: as in [`jaxcable.fit`][], for every specimen.
-    - `key`: the key of the start perturbations, the same for every specimen
-        (default `jax.random.key(0)`, as `jaxcable.fit`).
-    - `drive`: as in [`jaxcable.fit`][] for every specimen, or a sequence with one
-        such entry per specimen.
+    - `problems`: a sequence with one [`jaxcable.Problem`][] per specimen: its
+        tests and drives its own, the rest (the start model, its structure and its
+        values; `fit`, `per_test`, `transforms`, `covariate`) shared by all.
+    - `method`: the [`jaxcable.LeastSquares`][] of every specimen (its `key` the
+        same for every specimen).
     - `progress_meter`: how progress is shown ([`jaxcable.NoProgressMeter`][], the
         default, says nothing).
 
@@ -266,47 +250,55 @@ def fit_each(
 
     **Raises:**
 
-    `ValueError` naming the argument: `specimens` not a sequence of specimens, or a
-    specimen's tests malformed or with fewer fitted samples than parameters
-    (`specimens[k]`, with the test and field); `model`, `fit`, `per_test`,
-    `transforms`, `solver`, `max_steps`, `multistart`, `spread` or `drive` as
-    `jaxcable.fit` refuses them, or `model` outside its domain for every specimen;
-    `progress_meter` not a progress meter. `TypeError` naming `key` when it is not
-    one random key.
+    `ValueError` naming the argument: `problems` not a sequence of problems that
+    share their model and fields, or a specimen's tests malformed or with fewer
+    fitted samples than parameters (`problems[k]`, with the test and field); the
+    model or a field as `jaxcable.fit` refuses them, or the model outside its
+    domain for every specimen; `progress_meter` not a progress meter. `TypeError`
+    naming `method` when it is not a `LeastSquares`, or `key` when `method.key` is
+    not one random key.
     """
-    solver = _checked_solver(multistart, max_steps, spread, solver)
-    meter = check_progress_meter(progress_meter, NoProgressMeter())
-    key = _checked_key(key)
-    if not isinstance(model, AbstractCableModel):
-        raise ValueError(
-            "`model` must be a jaxcable model (an AbstractCableModel instance such as "
-            f"jaxcable.IntegratedModel()), got {type(model).__name__}."
+    if not isinstance(method, LeastSquares):
+        raise TypeError(
+            f"`method` must be a jaxcable.LeastSquares, got {type(method).__name__}."
         )
-    specimen_list = _specimen_list(specimens)
-    drives = _drives(drive, len(specimen_list))
+    solver = least_squares_solver(method)
+    meter = check_progress_meter(progress_meter, NoProgressMeter())
+    key = _checked_key(method.key)
+    problem_list = _problem_list(problems)
+    first = problem_list[0]
+    model, covariate = first.model, first.covariate
+    specimen_list = [list(p.tests) for p in problem_list]
+    drives = [p.drive for p in problem_list]
     datas = []
     with meter.bar("checking the specimens", len(specimen_list)) as bar:
         for k, (tests, d) in enumerate(zip(specimen_list, drives)):
             try:
                 datas.append(pad_tests(tests, drive=d, covariate=covariate))
             except ValueError as e:
-                raise ValueError(f"`specimens[{k}]`: {e}") from None
+                raise ValueError(f"`problems[{k}]`: {e}") from None
             bar.advance()
     groups = grouped(specimen_list, datas)
     checks = [jax.device_get(_domain(model, g.data.cable)) for g in groups]
     template = _template(groups, checks, drives)
     problem, _ = make_problem(
-        model, template[0], fit, per_test, transforms, template[1], covariate
+        model,
+        template[0],
+        first.fit,
+        first.per_test,
+        first.transform_map,
+        template[1],
+        covariate,
     )
     for k, data in enumerate(datas):
         size = dataclasses.replace(problem.layout, num_tests=data.num_tests).size
         try:
             require_enough_samples(data, size)
         except ValueError as e:
-            raise ValueError(f"`specimens[{k}]`: {e}") from None
+            raise ValueError(f"`problems[{k}]`: {e}") from None
     layout = problem.layout
     per = tuple(n for n, q in zip(layout.names, layout.per_test) if q)
-    settings = (key, solver, max_steps, multistart, spread)
+    settings = (key, solver, method.max_steps, method.multistart, method.spread)
     results: list = [None] * len(specimen_list)
     label = f"fitting {len(specimen_list)} specimens"
     with meter.bar(label), warnings.catch_warnings():
@@ -315,6 +307,13 @@ def fit_each(
             fitted = _solve_group(model, group, check, problem, settings, per)
             for k, r in zip(group.indices, fitted):
                 results[k] = r
+    _warn_flagged(results)
+    return results
+
+
+def _warn_flagged(results: list[FitResult]) -> None:
+    """One [`jaxcable.IdentifiabilityWarning`][] naming the specimens whose results
+    have identifiability warnings, if any."""
     flagged = [k for k, r in enumerate(results) if r.warnings]
     if flagged:
         shown = ", ".join(str(k) for k in flagged[:10])
@@ -323,6 +322,5 @@ def fit_each(
             f"{len(flagged)} of {len(results)} specimens have identifiability "
             f"warnings (specimens {shown}{more}); see each FitResult.warnings.",
             IdentifiabilityWarning,
-            stacklevel=2,
+            stacklevel=3,
         )
-    return results

@@ -11,7 +11,7 @@ Jacobian at the optimum.
 
 import math
 import warnings
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable
 
 import equinox as eqx
 import jax
@@ -22,15 +22,15 @@ from jaxtyping import Array, Float, PRNGKeyArray
 
 from .._drive import FORCE_DRIVEN
 from .._models import MODELS, AbstractCableModel, transform_table
+from .._problem import LeastSquares, Problem
 from .._results import RESULTS
 from .data import (
-    as_test_list,
     test_id,
 )
 from .exported import current_fit_kernel
 from .parameters import test_slice
 from .problem import (
-    Problem,
+    ResidualProblem,
     StartError,
     make_problem,
     require_enough_samples,
@@ -45,27 +45,15 @@ from .statistics import (
 )
 
 
-def _checked_solver(multistart, max_steps, spread, solver) -> optx.AbstractGaussNewton:
-    """The solver of `fit` (default Levenberg-Marquardt), after checking the solver
-    options."""
-    if not isinstance(multistart, int) or multistart < 1:
-        raise ValueError(f"`multistart` must be an int >= 1, got {multistart!r}.")
-    if not isinstance(max_steps, int) or max_steps < 1:
-        raise ValueError(f"`max_steps` must be an int >= 1, got {max_steps!r}.")
-    if not (isinstance(spread, (int, float)) and spread >= 0 and math.isfinite(spread)):
-        raise ValueError(f"`spread` must be a finite number >= 0, got {spread!r}.")
-    if solver is None:
+def least_squares_solver(method: LeastSquares) -> optx.AbstractGaussNewton:
+    """The solver of `method` ([`jaxcable.LeastSquares`][], checked when it was
+    made): its own, or by default Levenberg-Marquardt with rtol = atol = 1e-6."""
+    if method.solver is None:
         return LevenbergMarquardt(rtol=1e-6, atol=1e-6)
-    if not isinstance(solver, optx.AbstractGaussNewton):
-        raise ValueError(
-            "`solver` must be an optimistix Gauss-Newton-type least-squares solver "
-            "(optx.LevenbergMarquardt, optx.GaussNewton, optx.Dogleg, ...), got "
-            f"{type(solver).__name__}."
-        )
-    return solver
+    return method.solver
 
 
-def _require_valid_start(out: KernelOut, tests: list, problem: Problem) -> None:
+def _require_valid_start(out: KernelOut, tests: list, problem: ResidualProblem) -> None:
     """Raise a `StartError` if the user's start does not simulate finitely on every
     test, with the simulation's own reason (re-run for the first such test, by its
     drive)."""
@@ -119,7 +107,7 @@ def with_moved_start(model, test_list: list, drive, attempt):
 
 
 def run_kernel(
-    problem: Problem,
+    problem: ResidualProblem,
     u0,
     key: PRNGKeyArray | None,
     solver: optx.AbstractGaussNewton,
@@ -179,7 +167,7 @@ def _outcome(
 
 
 def _fitted_models(
-    out: KernelOut, problem: Problem
+    out: KernelOut, problem: ResidualProblem
 ) -> tuple[AbstractCableModel, tuple[AbstractCableModel, ...]]:
     """The fitted model (per-test parameters as batches) and one model per test."""
     # Sliced on the host and moved back in one call: eager per-leaf indexing cost
@@ -191,7 +179,7 @@ def _fitted_models(
 
 
 def _rmse(
-    out: KernelOut, problem: Problem, num_samples: np.ndarray
+    out: KernelOut, problem: ResidualProblem, num_samples: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Each test's RMS residual in its scored channel: elongation, mm (NaN for an
     elongation-driven test); force, N (NaN for a force-driven test); and as a
@@ -208,22 +196,14 @@ def _rmse(
 
 
 def fit(
-    model: AbstractCableModel,
-    tests,
-    *,
-    fit: Sequence[str] | None = None,
-    per_test: Sequence[str] | None = None,
-    transforms: Mapping[str, str] | None = None,
-    solver: optx.AbstractGaussNewton | None = None,
-    max_steps: int = 256,
-    multistart: int = 4,
-    spread: float = 0.5,
-    key: PRNGKeyArray | None = None,
-    throw: bool = True,
-    drive="auto",
-    covariate: str | None = None,
+    problem: Problem, method: LeastSquares = LeastSquares(), *, throw: bool = True
 ) -> FitResult:
     """Fit a model's parameters to one or many tests by least squares.
+
+    ```python
+    result = jc.fit(jc.Problem(jc.BurgersModel(), tests))
+    result = jc.fit(problem, jc.LeastSquares(multistart=8), throw=False)
+    ```
 
     **Drives.** A force-controlled test (creep, a load cycle) drives its model by its
     time-stamped force history ([`jaxcable.simulate_force_history`][]); its residual
@@ -231,15 +211,16 @@ def fit(
     (stress relaxation, a constant crosshead rate) drives it by its elongation
     history ([`jaxcable.simulate_elongation_history`][], a Newton solve for the
     force at every sample); its residual is the model's minus the measured force, N.
-    `drive="auto"` takes each test's `metadata['control']` (a `# control:` line),
-    else detects it from the data ([`jaxcable.detect_control`][]). Tests of both
+    `problem.drive = "auto"` takes each test's `metadata['control']` (a `# control:`
+    line), else detects it from the data ([`jaxcable.detect_control`][]). Tests of both
     kinds may be fitted together: each test's residuals are then divided by the
     noise standard deviation of its scored channel (robust, from second
     differences), so that every residual is dimensionless and weighs by its own
     noise. Residuals count over the samples each test's mask keeps (all by default).
     Material parameters are shared by all tests (different lengths, rates, forces);
-    parameters named in `per_test` take one value per test. The tests are padded to
-    one length and run in one `vmap`, so one compiled kernel serves them all.
+    parameters named in `problem.per_test` take one value per test. The tests are
+    padded to one length and run in one `vmap`, so one compiled kernel serves them
+    all.
 
     **Method.** Levenberg-Marquardt (optimistix's damped Newton descent in a trust
     region) on unconstrained parameters u. The Jacobian of the residuals is taken
@@ -256,7 +237,7 @@ def fit(
 
     {TRANSFORMS}
 
-    (`transforms` overrides with `'log'` or `'linear'`.) Constraints the
+    (`problem.transforms` overrides with `'log'` or `'linear'`.) Constraints the
     reparameterisation does not enforce (Park's t_r2 > 0 and E1c A above the breaking
     load, the Bouc-Wen monotonicity bound) make the simulation fail; its residuals are
     then NaN and the solver rejects the step. A start on the bound of `1 + exp(u)` or
@@ -264,21 +245,24 @@ def fit(
 
     **A start that fails.** A start outside its domain for a test's cable, or whose
     simulation of a test is not finite or goes beyond the cable's break, is moved,
-    not refused: the fit starts instead from [`jaxcable.scaled_start`][]`(model,
-    tests)` (its moduli scaled to the data's first loading, its times to the data's
-    holds when far off), `FitResult.start_note` says why and how, and a
+    not refused: the fit starts instead from the start scaled to the data
+    ([`jaxcable.scaled_start`][], as [`jaxcable.Problem.with_scaled_start`][]: its
+    moduli scaled to the data's first loading, its times to the data's holds when
+    far off), `FitResult.start_note` says why and how, and a
     [`jaxcable.StartMovedWarning`][] is issued. Only a scaled start that fails too
     raises.
 
-    **Initial guess.** From the start `model`, every stiffness-like fitted parameter
-    (moduli and viscosities times c; the Bouc-Wen compliance `z_y` divided by c) is
+    **Initial guess.** From the start `problem.model`, every stiffness-like fitted
+    parameter (moduli and viscosities times c; the Bouc-Wen compliance `z_y`
+    divided by c) is
     scaled by one factor c found in closed form: the least-squares multiplier
     g = <e_model, e_measured> / <e_model, e_model> of the model's elongation gives
     c <- c / g, exact in one step for the linear models (their strains scale as
     1 / c) and iterated 4 times for the others, keeping the iterate of least loss
     (never worse than the given start); c stays within [1/30, 30]. Then
-    `multistart - 1` further starts perturb u by normal noise of standard deviation
-    `spread` (0.5: about +-50 % on a log parameter), drawn from `key`; the starts are
+    `method.multistart - 1` further starts perturb u by normal noise of standard
+    deviation `method.spread` (0.5: about +-50 % on a log parameter), drawn from
+    `method.key`; the starts are
     solved one after the other in the same compiled kernel and the converged one of
     least loss is kept.
 
@@ -302,35 +286,15 @@ def fit(
 
     **Arguments:**
 
-    - `model`: any [`jaxcable.AbstractCableModel`][] with scalar parameters; it gives
-        the start values of the fitted parameters and the values of the others.
-    - `tests`: a [`jaxcable.TestData`][] or a sequence of them, with elongation and
-        `length_mm` metadata; an optional boolean `mask` attribute (True = fit the
-        sample) excludes samples, e.g. slack, from the residual.
-    - `fit`: names of the parameters to fit; default the model's identifiable set
-        where the registry declares one (`IntegratedModel`: `PARK_IDENTIFIABLE`),
-        else all inexact array fields.
-    - `per_test`: names of parameters fitted with one value per test (fitted whether
-        or not they are in `fit`).
-    - `transforms`: optional {name: `'log'` | `'linear'`} overriding the table above.
-    - `solver`: an optimistix Gauss-Newton-type least-squares solver
-        (`optx.LevenbergMarquardt`, `optx.GaussNewton`, `optx.Dogleg`, ...); default
-        Levenberg-Marquardt with rtol = atol = 1e-6 and textbook trust-region
-        constants.
-    - `max_steps`: solver steps per start.
-    - `multistart`: number of starts (>= 1).
-    - `spread`: standard deviation of the start perturbations in u.
-    - `key`: a `jax.random` key for the perturbations; default `jax.random.key(0)`, so
-        that a fit is reproducible unless asked otherwise.
+    - `problem`: a [`jaxcable.Problem`][]: the start model, the tests, which
+        parameters to fit (and which per test), their transforms, the drives and
+        the covariate.
+    - `method`: a [`jaxcable.LeastSquares`][]: the solver, its steps, and the
+        starts (default `jaxcable.LeastSquares()`).
     - `throw`: raise `RuntimeError` when no start converged (default), with the
         solver's message and the identifiability warnings; with `False` return the
         best start, its `result` the solver's ([`jaxcable.RESULTS`][]: optimistix's
         members, e.g. `max_steps_reached`, or `every_start_failed`).
-    - `drive`: `"auto"` (default; see Drives above), `"force"`, `"elongation"`, or a
-        sequence of these, one per test.
-    - `covariate`: the name of an extra column of every test (`test.extra[name]`)
-        set as `Cable.covariate` at each sample, for a covariate-dependent model
-        (e.g. `jaxcable.DiscoveredTerm`); default None, 0 throughout.
 
     **Returns:**
 
@@ -338,35 +302,77 @@ def fit(
 
     **Raises:**
 
-    `ValueError` naming the argument: `model` not a model or batched, or failing on
-    a test both at its start values and scaled to the data (below); `tests` empty
-    or malformed (see
+    `TypeError` naming `problem` or `method` when it is not a `Problem` or a
+    `LeastSquares` (the values check their own fields when they are made).
+    `ValueError` naming the field: `model` batched, or failing on a test both at its
+    start values and scaled to the data (above); `tests` malformed (see
     [`jaxcable.pad_tests`][]); an unknown or repeated name in `fit`, `per_test` or
-    `transforms`; fewer fitted samples than parameters; a bad `multistart`,
-    `max_steps`, `spread` or `solver`.
+    `transforms`; fewer fitted samples than parameters.
     """
-    solver = _checked_solver(multistart, max_steps, spread, solver)
-    test_list = as_test_list(tests)
+    if not isinstance(problem, Problem):
+        raise TypeError(
+            f"`problem` must be a jaxcable.Problem, got {type(problem).__name__}."
+        )
+    if not isinstance(method, LeastSquares):
+        raise TypeError(
+            f"`method` must be a jaxcable.LeastSquares, got {type(method).__name__}."
+        )
+    solver = least_squares_solver(method)
+    test_list = list(problem.tests)
 
     def attempt(start):
-        problem, u_user = make_problem(
-            start, test_list, fit, per_test, transforms, drive, covariate
+        residual_problem, u_user = make_problem(
+            start,
+            test_list,
+            problem.fit,
+            problem.per_test,
+            problem.transform_map,
+            problem.drive,
+            problem.covariate,
         )
-        p = problem.layout.size
-        n = require_enough_samples(problem.data, p)
+        p = residual_problem.layout.size
+        n = require_enough_samples(residual_problem.data, p)
         jac = "fwd" if p <= n else "bwd"
         out = run_kernel(
-            problem, u_user, key, solver, max_steps, jac, multistart, spread, test_list
+            residual_problem,
+            u_user,
+            method.key,
+            solver,
+            method.max_steps,
+            jac,
+            method.multistart,
+            method.spread,
+            test_list,
         )
-        return problem, out
+        return residual_problem, out
 
-    (problem, out), note = with_moved_start(model, test_list, drive, attempt)
-    layout = problem.layout
+    (residual_problem, out), note = with_moved_start(
+        problem.model, test_list, problem.drive, attempt
+    )
+    layout = residual_problem.layout
     units = tuple(u for u, s in zip(layout.units, layout.sizes) for _ in range(s))
     per = tuple(n for n, q in zip(layout.names, layout.per_test) if q)
     return fit_result(
-        out, problem, test_list, layout.labels, units, per, throw, start_note=note
+        out,
+        residual_problem,
+        test_list,
+        layout.labels,
+        units,
+        per,
+        throw,
+        start_note=note,
     )
+
+
+def fit_tests(model: AbstractCableModel, tests, **kwargs) -> FitResult:
+    """[`jaxcable.fit`][] with the fields of its `Problem` (`fit`, `per_test`,
+    `transforms`, `drive`, `covariate`) and of its `LeastSquares` (`solver`,
+    `max_steps`, `multistart`, `spread`, `key`) and `throw` as keywords, for the
+    modules of the package that do not build a `Problem` yet."""
+    fields = ("fit", "per_test", "transforms", "drive", "covariate")
+    problem = Problem(model, tests, **{k: kwargs.pop(k) for k in fields if k in kwargs})
+    throw = kwargs.pop("throw", True)
+    return fit(problem, LeastSquares(**kwargs), throw=throw)
 
 
 # The table of reparameterisations is derived from the models' declarations
@@ -380,7 +386,7 @@ if fit.__doc__:
 
 def fit_result(
     out: KernelOut,
-    problem: Problem,
+    problem: ResidualProblem,
     test_list: list,
     labels: tuple[str, ...],
     units: tuple[str, ...],
@@ -427,13 +433,7 @@ def fit_result(
 
 
 def make_loss(
-    model: AbstractCableModel,
-    tests,
-    *,
-    fit: Sequence[str] | None = None,
-    per_test: Sequence[str] | None = None,
-    transforms: Mapping[str, str] | None = None,
-    drive="auto",
+    problem: Problem,
 ) -> tuple[
     Callable[[dict[str, Array]], Float[Array, ""]],
     dict[str, Array],
@@ -449,7 +449,8 @@ def make_loss(
     see [`jaxcable.fit`][] for each model's reparameterisation).
 
     ```python
-    loss, params, to_model = jc.make_loss(jc.BurgersModel(), tests)  # log-parameters
+    problem = jc.Problem(jc.BurgersModel(), tests)
+    loss, params, to_model = jc.make_loss(problem)  # log-parameters
     opt = optax.adam(1e-2); state = opt.init(params)
     step = jax.jit(lambda p, s: opt.update(jax.grad(loss)(p), s))
     for _ in range(2000):
@@ -462,8 +463,7 @@ def make_loss(
 
     **Arguments:**
 
-    - `model`, `tests`, `fit`, `per_test`, `transforms`, `drive`: as in
-        [`jaxcable.fit`][].
+    - `problem`: a [`jaxcable.Problem`][]: its model gives the start.
 
     **Returns:**
 
@@ -472,16 +472,33 @@ def make_loss(
     dict {name: unconstrained value}, a scalar for shared and a `(tests,)` array for
     per-test parameters; `to_model(params)`, the model with those values (per-test
     fields as `(tests,)` arrays).
+
+    **Raises:**
+
+    `TypeError` naming `problem` when it is not a `Problem`; `ValueError` naming the
+    field, as [`jaxcable.fit`][].
     """
-    problem, u0 = make_problem(
-        model, as_test_list(tests), fit, per_test, transforms, drive
+    if not isinstance(problem, Problem):
+        raise TypeError(
+            f"`problem` must be a jaxcable.Problem, got {type(problem).__name__}."
+        )
+    residual_problem, u0 = make_problem(
+        problem.model,
+        list(problem.tests),
+        problem.fit,
+        problem.per_test,
+        problem.transform_map,
+        problem.drive,
+        problem.covariate,
     )
-    layout = problem.layout
+    layout = residual_problem.layout
 
     def loss(params: dict[str, Array]) -> Float[Array, ""]:
-        return problem.ssr(layout.join(params))
+        return residual_problem.ssr(layout.join(params))
 
     def to_model(params: dict[str, Array]) -> AbstractCableModel:
-        return eqx.combine(problem.params(layout.join(params)), problem.static)
+        return eqx.combine(
+            residual_problem.params(layout.join(params)), residual_problem.static
+        )
 
     return loss, layout.split(u0), to_model

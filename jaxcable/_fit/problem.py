@@ -210,7 +210,7 @@ def residuals(
     )
 
 
-class Problem(eqx.Module):
+class ResidualProblem(eqx.Module):
     """Everything the fit kernel needs: the layout of u, the fixed values, the data.
 
     **Fields:**
@@ -300,12 +300,12 @@ class Problem(eqx.Module):
 
 def build_problem(
     layout: Layout, base: PyTree, static: PyTree, scales, data: PaddedTests, **subset
-) -> Problem:
-    """A `Problem` of the model split into `base` (its inexact-array fields) and
+) -> ResidualProblem:
+    """A `ResidualProblem` of the model split into `base` (its inexact-array fields) and
     `static`, with the scales of the linear transforms `scales` (converted to the
     default float dtype); `subset`: `select`, `fixed` and `free` for a problem that
     solves a subset of the layout."""
-    return Problem(
+    return ResidualProblem(
         layout=layout,
         static=static,
         base=base,
@@ -440,7 +440,7 @@ def make_problem(
     transforms: Mapping[str, str] | None,
     drive=None,
     covariate: str | None = None,
-) -> tuple[Problem, Float[Array, " p"]]:
+) -> tuple[ResidualProblem, Float[Array, " p"]]:
     """The least-squares problem of [`jaxcable.fit`][] and [`jaxcable.make_loss`][].
 
     **Arguments:**
@@ -451,7 +451,7 @@ def make_problem(
 
     **Returns:**
 
-    `(problem, u_start)`: the `Problem` and the unconstrained start values.
+    `(problem, u_start)`: the `ResidualProblem` and the unconstrained start values.
 
     **Raises:**
 

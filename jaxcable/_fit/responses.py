@@ -8,6 +8,7 @@ import equinox as eqx
 import numpy as np
 
 from .._models import AbstractCableModel
+from .._problem import Problem
 from .data import pad_tests, resolve_drives
 from .problem import residuals
 from .result import FitResult
@@ -18,27 +19,51 @@ _residuals = eqx.filter_jit(residuals)
 
 
 def model_responses(
+    result: FitResult | AbstractCableModel, problem: Problem
+) -> list[np.ndarray]:
+    """The model's value of each test's scored channel at every sample: the
+    elongation (m) of a force-driven test, the force (N) of an elongation-driven one.
+
+    ```python
+    result = jc.fit(problem)
+    elongation = jc.model_responses(result, problem)
+    ```
+
+    **Arguments:**
+
+    - `result`: a [`jaxcable.FitResult`][] of the problem's tests (per-test
+        parameters are matched by position), or a model.
+    - `problem`: a [`jaxcable.Problem`][]: its tests, its drive (`"auto"`, the
+        default, takes the drives of a `FitResult`, else detects them) and its
+        covariate (the column set as `Cable.covariate`); its model is not used.
+
+    **Returns:**
+
+    One array per test; NaN throughout a test whose simulation failed.
+
+    **Raises:**
+
+    `TypeError` naming `problem` when it is not a `Problem`.
+    """
+    if not isinstance(problem, Problem):
+        raise TypeError(
+            f"`problem` must be a jaxcable.Problem, got {type(problem).__name__}."
+        )
+    drive = problem.drive
+    if isinstance(drive, str) and drive == "auto" and isinstance(result, FitResult):
+        drive = list(result.drives) if result.drives else "auto"
+    return responses(result, list(problem.tests), drive, problem.covariate)
+
+
+def responses(
     result: FitResult | AbstractCableModel,
     tests: Sequence,
     drive=None,
     covariate: str | None = None,
 ) -> list[np.ndarray]:
-    """The model's value of each test's scored channel at every sample: the
-    elongation (m) of a force-driven test, the force (N) of an elongation-driven one.
-
-    **Arguments:**
-
-    - `result`: a [`jaxcable.FitResult`][] of these `tests` (per-test parameters are
-        matched by position), or a model.
-    - `tests`: the tests.
-    - `drive`: as in [`jaxcable.fit`][]; default the result's drives (a model:
-        `"auto"`).
-    - `covariate`: as in [`jaxcable.fit`][] (the column set as `Cable.covariate`).
-
-    **Returns:**
-
-    One array per test; NaN throughout a test whose simulation failed.
-    """
+    """[`jaxcable.model_responses`][] of `tests` by `drive` (None: the result's
+    drives, else `"auto"`) and `covariate`, for the modules of the package that do
+    not build a `Problem` yet."""
     if drive is None:
         drives = getattr(result, "drives", ())
         drive = list(drives) if drives else "auto"

@@ -7,8 +7,8 @@ seven candidate extensions of it: here they are all one model, every extension
 nested around the base at the null value of its effect (which reproduces the base
 exactly), and a fit is which of its parameters are free. The layout holds every
 parameter any of the fits frees; the solver's vector v has a fixed length `size` (the
-most any fit frees), each coordinate setting one entry of u (`Problem.select`);
-the other entries keep their values (`Problem.free`). The Jacobian is carried for the
+most any fit frees), each coordinate setting one entry of u (`ResidualProblem.select`);
+the other entries keep their values (`ResidualProblem.free`). The Jacobian is carried for the
 `size` coordinates only, so a fit of few parameters does not pay for the union.
 """
 
@@ -21,10 +21,12 @@ import numpy as np
 from jaxtyping import PRNGKeyArray
 
 from .._models import AbstractCableModel
+from .._problem import LeastSquares
 from .data import as_test_list, pad_tests
-from .fit import _checked_solver, fit_result, run_kernel, with_moved_start
+from .fit import fit_result, least_squares_solver, run_kernel, with_moved_start
 from .parameters import Layout, declared_parameters, field_at
 from .problem import (
+    ResidualProblem,
     _checked_model,
     _start,
     build_problem,
@@ -104,74 +106,21 @@ def fit_subset(
     `size` too small, a log-scaled start not positive, `model` without the layout's
     parameters or failing its domain check, fewer fitted samples than parameters.
     """
-    solver = _checked_solver(multistart, max_steps, spread, solver)
+    solver = least_squares_solver(
+        LeastSquares(solver, max_steps, multistart, spread, key)
+    )
     test_list = as_test_list(tests)
     free = tuple(free)
-    unknown = [n for n in free if n not in layout.names]
-    if unknown or len(set(free)) != len(free):
-        raise ValueError(
-            f"`free` must name distinct parameters of the layout {layout.names}, got "
-            f"{free}."
-        )
-    if not (isinstance(size, int) and size >= len(free)):
-        raise ValueError(f"`size` must be an int >= {len(free)}, got {size!r}.")
-    if any(layout.per_test):
-        raise ValueError("`layout`: a shared layout holds shared parameters only.")
     data = pad_tests(test_list, drive=drive, covariate=covariate)
-    if data.num_tests != layout.num_tests:
-        raise ValueError(
-            f"`tests`: {data.num_tests} tests for a layout of {layout.num_tests}."
-        )
-    missing = [n for n in layout.names if n not in declared_parameters(model)]
-    if missing:
-        raise ValueError(
-            f"`model`: a {type(model).__name__} has no parameters {missing} of the "
-            "layout; give the model the layout was made for."
-        )
-    order = [i for i, name in enumerate(layout.names) if name in free]
+    order = _checked_subset(model, layout, free, size, data)
 
     def attempt(model):
         # Checked, then run: a start that fails on a test is moved (as `fit`).
-        _checked_model(model, data, test_list)
-        params, static = eqx.partition(model, eqx.is_inexact_array)
-        # Strongly typed leaves: a start value given as a Python float is weakly typed,
-        # and another weak type would be another program.
-        params = jax.tree.map(lambda x: jnp.asarray(x, x.dtype), params)
-        p = layout.size
-        for i in order:
-            name, value = layout.names[i], float(field_at(model, layout.names[i]))
-            if layout.transforms[i] == "log" and not value > 0:
-                raise ValueError(
-                    f"`model.{name}` = {value} is fitted on a log scale and must start "
-                    "positive."
-                )
-        scales, fixed = _start(model, layout, only=free)
-        mask = np.isin(np.arange(p), order)
-        require_enough_samples(data, len(order))
-        dtype = jnp.result_type(float)
-        select = np.array(order + [p] * (size - len(order)), np.int32)
-        v0 = np.concatenate([fixed[order], np.zeros(size - len(order))])
-        problem = build_problem(
-            layout,
-            params,
-            static,
-            scales,
-            data,
-            select=jnp.asarray(select),
-            fixed=jnp.asarray(fixed, dtype),
-            free=jnp.asarray(mask),
+        problem, v0 = _subset_problem(model, layout, free, order, size, data, test_list)
+        out = run_kernel(
+            problem, v0, key, solver, max_steps, "fwd", multistart, spread, test_list
         )
-        return problem, run_kernel(
-            problem,
-            jnp.asarray(v0, dtype),
-            key,
-            solver,
-            max_steps,
-            "fwd",
-            multistart,
-            spread,
-            test_list,
-        )
+        return problem, out
 
     (problem, out), note = with_moved_start(model, test_list, drive, attempt)
     k = len(order)
@@ -190,3 +139,79 @@ def fit_subset(
     return fit_result(
         out, problem, test_list, labels, units, (), throw, start_note=note
     )
+
+
+def _checked_subset(
+    model: AbstractCableModel, layout: Layout, free: tuple, size, data
+) -> list[int]:
+    """The positions in `layout` of the names `free`, after checking `fit_subset`'s
+    arguments against each other.
+
+    **Raises:**
+
+    `ValueError` naming the argument, as [`fit_subset`][] says.
+    """
+    unknown = [n for n in free if n not in layout.names]
+    if unknown or len(set(free)) != len(free):
+        raise ValueError(
+            f"`free` must name distinct parameters of the layout {layout.names}, got "
+            f"{free}."
+        )
+    if not (isinstance(size, int) and size >= len(free)):
+        raise ValueError(f"`size` must be an int >= {len(free)}, got {size!r}.")
+    if any(layout.per_test):
+        raise ValueError("`layout`: a shared layout holds shared parameters only.")
+    if data.num_tests != layout.num_tests:
+        raise ValueError(
+            f"`tests`: {data.num_tests} tests for a layout of {layout.num_tests}."
+        )
+    missing = [n for n in layout.names if n not in declared_parameters(model)]
+    if missing:
+        raise ValueError(
+            f"`model`: a {type(model).__name__} has no parameters {missing} of the "
+            "layout; give the model the layout was made for."
+        )
+    return [i for i, name in enumerate(layout.names) if name in free]
+
+
+def _subset_problem(
+    model: AbstractCableModel,
+    layout: Layout,
+    free: tuple,
+    order: list[int],
+    size: int,
+    data,
+    test_list: list,
+) -> tuple[ResidualProblem, jax.Array]:
+    """The problem of `fit_subset` from the start `model` (checked: a
+    `StartError` when it fails on a test) and the solver's start vector v."""
+    _checked_model(model, data, test_list)
+    params, static = eqx.partition(model, eqx.is_inexact_array)
+    # Strongly typed leaves: a start value given as a Python float is weakly typed,
+    # and another weak type would be another program.
+    params = jax.tree.map(lambda x: jnp.asarray(x, x.dtype), params)
+    p = layout.size
+    for i in order:
+        name, value = layout.names[i], float(field_at(model, layout.names[i]))
+        if layout.transforms[i] == "log" and not value > 0:
+            raise ValueError(
+                f"`model.{name}` = {value} is fitted on a log scale and must start "
+                "positive."
+            )
+    scales, fixed = _start(model, layout, only=free)
+    mask = np.isin(np.arange(p), order)
+    require_enough_samples(data, len(order))
+    dtype = jnp.result_type(float)
+    select = np.array(order + [p] * (size - len(order)), np.int32)
+    v0 = np.concatenate([fixed[order], np.zeros(size - len(order))])
+    problem = build_problem(
+        layout,
+        params,
+        static,
+        scales,
+        data,
+        select=jnp.asarray(select),
+        fixed=jnp.asarray(fixed, dtype),
+        free=jnp.asarray(mask),
+    )
+    return problem, jnp.asarray(v0, dtype)

@@ -15,7 +15,7 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Bool, Float, PRNGKeyArray, PyTree
 
-from .problem import Problem
+from .problem import ResidualProblem
 
 
 class LevenbergMarquardt(optx.AbstractGaussNewton):
@@ -104,7 +104,7 @@ _SECANT_RANGE = 30.0
 
 
 def residuals_and_jacobian(
-    problem: Problem, u: Float[Array, " p"], jac: Literal["fwd", "bwd"]
+    problem: ResidualProblem, u: Float[Array, " p"], jac: Literal["fwd", "bwd"]
 ) -> tuple[Float[Array, " residuals"], Float[Array, "residuals p"]]:
     """The flat residuals (m) and their Jacobian in u, in one differentiated scan:
     forward mode carries the p tangents through the scan together, reverse mode one
@@ -181,7 +181,7 @@ def with_jacobian_jvp(
     return wrapped
 
 
-def _scaled_residual_fn(problem: Problem, jac: Literal["fwd", "bwd"], scale):
+def _scaled_residual_fn(problem: ResidualProblem, jac: Literal["fwd", "bwd"], scale):
     """fn(u, args) for optimistix: the problem's residuals / scale, their JVP a
     product with the Jacobian computed with them (`with_jacobian_jvp`)."""
     fn = with_jacobian_jvp(
@@ -191,7 +191,7 @@ def _scaled_residual_fn(problem: Problem, jac: Literal["fwd", "bwd"], scale):
 
 
 def solve(
-    problem: Problem,
+    problem: ResidualProblem,
     u0: Float[Array, " p"],
     solver: optx.AbstractGaussNewton,
     max_steps: int,
@@ -242,7 +242,7 @@ class _SecantCarry(eqx.Module):
 
 
 def _data_derived_start(
-    problem: Problem, u_user: Float[Array, " p"]
+    problem: ResidualProblem, u_user: Float[Array, " p"]
 ) -> tuple[Float[Array, " p"], Bool[Array, " tests"]]:
     """The user's start with every stiffness-like parameter scaled to fit the data.
 
@@ -339,7 +339,7 @@ class KernelOut(eqx.Module):
 
 @eqx.filter_jit
 def fit_kernel(
-    problem: Problem,
+    problem: ResidualProblem,
     u_user: Float[Array, " p"],
     key: PRNGKeyArray,
     solver: optx.AbstractGaussNewton,

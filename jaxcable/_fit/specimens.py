@@ -11,7 +11,7 @@ import numpy as np
 from .._models import AbstractCableModel
 from .._results import RESULTS
 from .data import PaddedTests, test_id
-from .problem import Problem, _start, build_problem
+from .problem import ResidualProblem, _start, build_problem
 from .result import FitResult, concrete_result
 from .statistics import Statistics
 
@@ -108,8 +108,8 @@ def lane(tree, j: int):
 
 
 def group_problem(
-    model: AbstractCableModel, template: Problem, group: Group
-) -> tuple[Problem, jax.Array]:
+    model: AbstractCableModel, template: ResidualProblem, group: Group
+) -> tuple[ResidualProblem, jax.Array]:
     """The problem of `group`'s specimens (its data: the first specimen's) and the
     start u: `template`'s (from `make_problem` of any specimen) for the group's
     number of tests."""
@@ -138,7 +138,7 @@ def start_failure(model, tests: list, drives, ok: np.ndarray) -> RESULTS:
 
 def failed_result(
     model: AbstractCableModel,
-    problem: Problem,
+    problem: ResidualProblem,
     tests: list,
     per_test: tuple[str, ...],
     num_starts: int,
