@@ -79,7 +79,9 @@ class Case:
     """A generated file and what reading it must give.
 
     - `text`: the file's bytes.
-    - `kwargs`: the arguments of `read_test` besides the path.
+    - `kwargs`: the arguments of `read_test` besides the path, by their names in
+        the file or `jaxcable.ReadOptions` (`length_mm`, `detect_slack`, ...; see
+        [`read`][]).
     - `time`, `force`, `elongation`, `lines`: the data rows in SI units and their
         1-based lines, as a correct reader reads them.
     - `must_fail`: whether the file holds something the reader must refuse.
@@ -384,6 +386,22 @@ def _classify(rows, layout, sep, decimal_comma, width) -> None:
                 row.kind = OTHER
 
 
+def read(read_test, path, kwargs: dict):
+    """`read_test(path, ...)` with one flat mapping of `columns`, the fields of
+    `jaxcable.ReadOptions` and metadata keys (the others) as its arguments."""
+    from jaxcable import ReadOptions
+
+    fields = {f.name for f in dataclasses.fields(ReadOptions)}
+    options = {k: v for k, v in kwargs.items() if k in fields}
+    metadata = {k: v for k, v in kwargs.items() if k not in fields | {"columns"}}
+    return read_test(
+        path,
+        kwargs.get("columns"),
+        metadata=metadata or None,
+        options=ReadOptions(**options),
+    )
+
+
 def check(case: Case, path: pathlib.Path, read_test) -> tuple[str, float, str]:
     """Read `path` (holding `case.text`) and judge the outcome.
 
@@ -397,7 +415,7 @@ def check(case: Case, path: pathlib.Path, read_test) -> tuple[str, float, str]:
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            data = read_test(path, **case.kwargs)
+            data = read(read_test, path, case.kwargs)
     except ValueError as e:
         seconds = time.perf_counter() - start
         if str(path) not in str(e):
@@ -708,7 +726,7 @@ def keyword_sweep(jc, folder: pathlib.Path) -> dict:
     bad = (5, -1, "", "x", None, [1], {}, float("nan"), True, b"s", 1e309, object())
     calls = {
         **{
-            f"read_test({k}=)": (lambda v, k=k: jc.read_test(path, **{k: v}))
+            f"read_test({k}=)": (lambda v, k=k: read(jc.read_test, path, {k: v}))
             for k in (
                 "columns",
                 "skip_rows",

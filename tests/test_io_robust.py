@@ -66,9 +66,9 @@ def test_typo_under_canonical_header_is_an_error(tmp_path, row, column, place):
 
 def test_typo_under_matched_header_and_units_row_is_an_error(tmp_path):
     text = "Test report\nTime,Load,Extension\n(s),(N),(mm)\n0,0,N/A\n1,1,1\n2,2,2\n"
-    _error(_write(tmp_path, text), 4, "elongation_mm", length_mm=100)
+    _error(_write(tmp_path, text), 4, "elongation_mm", metadata={"length_mm": 100})
     text = "Zeit (s);Kraft (N)\n\nO,5;0\n1;1\n2;2\n"
-    _error(_write(tmp_path, text), 3, "time_s", length_mm=100)
+    _error(_write(tmp_path, text), 3, "time_s", metadata={"length_mm": 100})
 
 
 def test_blank_comment_and_units_rows_under_the_header_are_not_data(tmp_path):
@@ -79,7 +79,7 @@ def test_blank_comment_and_units_rows_under_the_header_are_not_data(tmp_path):
 
 
 def test_typo_above_first_row_without_header_is_an_error(tmp_path):
-    kwargs = {"columns": "time_s,force_N,elongation_mm", "length_mm": 100}
+    kwargs = {"columns": "time_s,force_N,elongation_mm", "metadata": {"length_mm": 100}}
     for first, column in [
         ("0,0,N/A", "elongation_mm"),
         ("O.5,0,0", "time_s"),
@@ -111,7 +111,7 @@ def test_conversion_to_si_is_checked(tmp_path):
     assert "repeated time stamp after the conversion from time_ms" in message
     # Large but finite values read exactly.
     path = _write(tmp_path, head + "time_s,force_N\n0,-1e300\n1,1e300\n")
-    data = jc.read_test(path, detect_slack=False)
+    data = jc.read_test(path, options=jc.ReadOptions(detect_slack=False))
     np.testing.assert_array_equal(data.force, [-1e300, 1e300])
 
 
@@ -168,7 +168,7 @@ def test_header_cell_with_an_open_bracket_is_read_fast(tmp_path, spaces):
         path = _write(tmp_path, f"{header}\n0,0,1\n1,1,2\n")
         start = time.perf_counter()
         try:
-            jc.read_test(path, length_mm=100)
+            jc.read_test(path, metadata={"length_mm": 100})
         except ValueError as e:
             assert str(path) in str(e)
         assert time.perf_counter() - start < 1.0
@@ -178,10 +178,12 @@ def test_quoted_cell_over_csv_limit(tmp_path):
     remark = "x" * 200_000
     text = f'0,0,"{remark}"\n1,1,"ok, fine"\n'
     path = _write(tmp_path, text)
-    data = jc.read_test(path, columns="time_s,force_N,-", length_mm=100)
+    data = jc.read_test(path, columns="time_s,force_N,-", metadata={"length_mm": 100})
     np.testing.assert_array_equal(data.force, [0.0, 1.0])
     path = _write(tmp_path, f'time_s,force_N\n0,"{"1" * 200_000}"\n1,1\n')
-    assert "not a finite number" in _error(path, 2, "force_N", length_mm=100)
+    assert "not a finite number" in _error(
+        path, 2, "force_N", metadata={"length_mm": 100}
+    )
 
 
 def test_stray_byte_of_another_encoding_is_reported_on_its_line(tmp_path):
@@ -189,7 +191,7 @@ def test_stray_byte_of_another_encoding_is_reported_on_its_line(tmp_path):
     # header still reads (line by line), and the row is an error.
     text = "时间,力,位移\n(s),(N),(mm)\n0,0,0\n1,1,1\n".encode("gbk")
     text = text.replace(b"1,1,1", b"1,1\xb5\xff,1")
-    _error(_write(tmp_path, text), 4, "force_N", length_mm=100)
+    _error(_write(tmp_path, text), 4, "force_N", metadata={"length_mm": 100})
 
 
 # ----------------------------------------------------------------------------------

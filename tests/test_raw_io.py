@@ -57,7 +57,7 @@ def _error(path, line, column, **kwargs) -> str:
 
 def test_vhb_like_export_with_columns(tmp_path):
     path = _write_vhb_like(tmp_path / "vhb.csv")
-    data = jc.read_test(path, columns=VHB_COLUMNS, length_mm=80)
+    data = jc.read_test(path, columns=VHB_COLUMNS, metadata={"length_mm": 80})
     t, x, f = _vhb_like_rows()
     np.testing.assert_allclose(data.time, t, atol=1e-12)
     np.testing.assert_allclose(data.elongation, np.round(x, 4) * 1e-3, atol=1e-15)
@@ -71,8 +71,8 @@ def test_vhb_like_export_with_columns(tmp_path):
 def test_vhb_like_export_best_effort_header(tmp_path):
     # 时间 (time), 位移 (displacement), 力 (force) over the units row (s),(mm),(N).
     path = _write_vhb_like(tmp_path / "vhb.csv")
-    by_header = jc.read_test(path, length_mm=80)
-    by_columns = jc.read_test(path, columns=VHB_COLUMNS, length_mm=80)
+    by_header = jc.read_test(path, metadata={"length_mm": 80})
+    by_columns = jc.read_test(path, columns=VHB_COLUMNS, metadata={"length_mm": 80})
     for name in ("time", "force", "elongation", "lines", "mask"):
         np.testing.assert_array_equal(
             getattr(by_header, name), getattr(by_columns, name)
@@ -85,7 +85,7 @@ def test_header_encodings(tmp_path, encoding):
     text = f"{header}\n0;0;0;1\n1;0,5;2,5;2\n"
     path = tmp_path / "de.csv"
     path.write_bytes(text.encode(encoding))
-    data = jc.read_test(path, length_mm=300)
+    data = jc.read_test(path, metadata={"length_mm": 300})
     np.testing.assert_allclose(data.time, [0.0, 1.0])
     np.testing.assert_allclose(data.force, [0.0, 500.0])  # kN, decimal comma
     np.testing.assert_allclose(data.elongation, [0.0, 2.5e-3])
@@ -96,9 +96,19 @@ def test_gbk_header_never_crashes_utf8_reading(tmp_path):
     # A GBK header read as UTF-8 fails; given explicitly, that is an error with the
     # line, and without it the encoding is detected.
     path = _write_vhb_like(tmp_path / "vhb.csv")
-    message = _error(path, 2, None, columns=VHB_COLUMNS, length_mm=80, encoding="utf-8")
+    message = _error(
+        path,
+        2,
+        None,
+        columns=VHB_COLUMNS,
+        metadata={"length_mm": 80},
+        options=jc.ReadOptions(encoding="utf-8"),
+    )
     assert "utf-8" in message
-    assert jc.read_test(path, columns=VHB_COLUMNS, length_mm=80).num_samples == 101
+    assert (
+        jc.read_test(path, columns=VHB_COLUMNS, metadata={"length_mm": 80}).num_samples
+        == 101
+    )
 
 
 @pytest.mark.parametrize(
@@ -117,7 +127,7 @@ def test_separators(tmp_path, sep, decimal):
     np.testing.assert_allclose(data.force, [0.0, 1.25, 2.5])
     np.testing.assert_allclose(data.elongation, [0.0, 0.1e-3, 0.2e-3])
     assert data.metadata == {"length_mm": 250.0}
-    assert jc.read_test(path, delimiter=sep).num_samples == 3
+    assert jc.read_test(path, options=jc.ReadOptions(delimiter=sep)).num_samples == 3
 
 
 def test_columns_with_ignored_columns_and_units(tmp_path):
@@ -132,7 +142,7 @@ def test_columns_with_ignored_columns_and_units(tmp_path):
     data = jc.read_test(
         path,
         columns="-,time_min,-,force_kN,elongation_m,temperature_C",
-        length_mm=300,
+        metadata={"length_mm": 300},
     )
     np.testing.assert_allclose(data.time, [0.0, 30.0, 60.0])
     np.testing.assert_allclose(data.force, [0.0, 100.0, 200.0])
@@ -144,7 +154,7 @@ def test_columns_with_ignored_columns_and_units(tmp_path):
     same = jc.read_test(
         path,
         columns=["-", "time_min", "-", "force_kN", "elongation_m", "-"],
-        length_mm=1,
+        metadata={"length_mm": 1},
     )
     np.testing.assert_array_equal(same.force, data.force)
 
@@ -156,7 +166,7 @@ def test_columns_with_ignored_columns_and_units(tmp_path):
 def test_time_units(tmp_path, token, to_s):
     path = tmp_path / "t.csv"
     path.write_text("0,0\n2,1\n4,2\n", encoding="utf-8")
-    data = jc.read_test(path, columns=f"{token},force_N", length_mm=100)
+    data = jc.read_test(path, columns=f"{token},force_N", metadata={"length_mm": 100})
     np.testing.assert_allclose(data.time, np.array([0, 2, 4]) * to_s)
 
 
@@ -175,26 +185,44 @@ PREAMBLE = (
 def test_skip_rows_detected_and_given(tmp_path):
     path = tmp_path / "preamble.csv"
     path.write_text(PREAMBLE, encoding="utf-8")
-    detected = jc.read_test(path, length_mm=100)
+    detected = jc.read_test(path, metadata={"length_mm": 100})
     np.testing.assert_array_equal(detected.lines, [6, 7, 8])
     np.testing.assert_allclose(detected.force, [0.0, 0.5, 1.0])
     np.testing.assert_allclose(detected.elongation, [0.0, 1e-3, 2e-3])
-    given = jc.read_test(path, skip_rows=5, length_mm=100)
+    given = jc.read_test(
+        path, metadata={"length_mm": 100}, options=jc.ReadOptions(skip_rows=5)
+    )
     np.testing.assert_array_equal(given.lines, detected.lines)
     np.testing.assert_array_equal(given.force, detected.force)
     spec = jc.read_test(
-        path, skip_rows=5, columns="time_s,force_N,elongation_mm", length_mm=100
+        path,
+        columns="time_s,force_N,elongation_mm",
+        metadata={"length_mm": 100},
+        options=jc.ReadOptions(skip_rows=5),
     )
     np.testing.assert_array_equal(spec.elongation, detected.elongation)
     # One row too few skipped: the header is read as data, and that is said where.
-    _error(path, 5, "time_s", skip_rows=4, columns="time_s,force_N,-", length_mm=1)
-    _error(path, None, None, skip_rows=99, length_mm=1)
+    _error(
+        path,
+        5,
+        "time_s",
+        columns="time_s,force_N,-",
+        metadata={"length_mm": 1},
+        options=jc.ReadOptions(skip_rows=4),
+    )
+    _error(
+        path,
+        None,
+        None,
+        metadata={"length_mm": 1},
+        options=jc.ReadOptions(skip_rows=99),
+    )
 
 
 def test_units_row_under_plain_header(tmp_path):
     path = tmp_path / "units.csv"
     path.write_text("Time,Load,Extension\ns,kN,mm\n0,0,0\n1,0.002,0.5\n")
-    data = jc.read_test(path, length_mm=100)
+    data = jc.read_test(path, metadata={"length_mm": 100})
     np.testing.assert_allclose(data.force, [0.0, 2.0])
     np.testing.assert_allclose(data.elongation, [0.0, 0.5e-3])
 
@@ -206,15 +234,15 @@ def test_units_row_under_plain_header(tmp_path):
 def test_unknown_header_asks_for_columns(tmp_path):
     path = tmp_path / "anon.csv"
     path.write_text("a,b,c\n0,0,0\n1,1,1\n")
-    message = _error(path, 1, None, length_mm=1)
+    message = _error(path, 1, None, metadata={"length_mm": 1})
     assert "--columns" in message and "time_s,elongation_mm,force_N" in message
     # A header with a time but no force column says so.
     path.write_bytes("\r\n时间,位移\r\n(s),(mm)\r\n0,0\r\n1,1\r\n".encode("gbk"))
-    message = _error(path, 2, None, length_mm=1)
+    message = _error(path, 2, None, metadata={"length_mm": 1})
     assert "no force column" in message and "--columns" in message
     # No header at all.
     path.write_text("0,0\n1,1\n")
-    assert "--columns" in _error(path, 1, None, length_mm=1)
+    assert "--columns" in _error(path, 1, None, metadata={"length_mm": 1})
 
 
 def _vhb_with(tmp_path, line_index, cells):
@@ -242,23 +270,31 @@ def _vhb_with(tmp_path, line_index, cells):
 def test_bad_cells_name_file_line_column(tmp_path, cells, column, what):
     # Row 5 (line 9) follows t = 0.4 at line 8.
     path = _vhb_with(tmp_path, 5, cells)
-    message = _error(path, 9, None, columns=VHB_COLUMNS, length_mm=80)
+    message = _error(path, 9, None, columns=VHB_COLUMNS, metadata={"length_mm": 80})
     assert f"column {column}" in message and what in message, message
 
 
 def test_other_bad_inputs(tmp_path):
     path = _write_vhb_like(tmp_path / "vhb.csv")
-    message = _error(path, None, None, columns="time_s,elongation_mm", length_mm=80)
+    message = _error(
+        path, None, None, columns="time_s,elongation_mm", metadata={"length_mm": 80}
+    )
     assert "no force column" in message
-    message = _error(path, None, None, columns="time_s,stretch,force_N", length_mm=80)
+    message = _error(
+        path, None, None, columns="time_s,stretch,force_N", metadata={"length_mm": 80}
+    )
     assert "'stretch' is not a column name" in message and "time_min" in message
-    message = _error(path, None, None, columns="time_s,force_kN,force_N", length_mm=80)
+    message = _error(
+        path, None, None, columns="time_s,force_kN,force_N", metadata={"length_mm": 80}
+    )
     assert "second force column" in message
-    message = _error(path, 4, None, columns="time_s,force_N", length_mm=80)
+    message = _error(
+        path, 4, None, columns="time_s,force_N", metadata={"length_mm": 80}
+    )
     assert "3 cells but columns names 2 columns" in message
     message = _error(path, None, "length_mm", columns=VHB_COLUMNS)
     assert "--length-mm" in message
-    _error(path, None, None, columns=VHB_COLUMNS, length_mm=0)
+    _error(path, None, None, columns=VHB_COLUMNS, metadata={"length_mm": 0})
 
 
 # ----------------------------------------------------------------------------------
@@ -267,7 +303,7 @@ def test_other_bad_inputs(tmp_path):
 
 def test_slack_end_of_unloading_is_masked_and_clipped(tmp_path):
     path = _write_vhb_like(tmp_path / "vhb.csv")
-    data = jc.read_test(path, columns=VHB_COLUMNS, length_mm=80)
+    data = jc.read_test(path, columns=VHB_COLUMNS, metadata={"length_mm": 80})
     report = data.slack_report
     # Threshold: 0.5 % of the 2 N peak (the synthetic force has no noise).
     assert report.threshold == pytest.approx(0.01)
@@ -292,7 +328,12 @@ def test_slack_end_of_unloading_is_masked_and_clipped(tmp_path):
     text = str(report)
     assert "1 slack stretch: lines 92-104" in text and "13 samples masked" in text
     # Detection off: the file as it is.
-    raw = jc.read_test(path, columns=VHB_COLUMNS, length_mm=80, detect_slack=False)
+    raw = jc.read_test(
+        path,
+        columns=VHB_COLUMNS,
+        metadata={"length_mm": 80},
+        options=jc.ReadOptions(detect_slack=False),
+    )
     assert raw.mask.all() and raw.slack_report is None and raw.force_raw is None
     np.testing.assert_array_equal(raw.force, data.force_raw)
     # mask_slack on it (or again on its result) gives the same.
@@ -393,7 +434,7 @@ def test_vhb4910_loading_unloading(shared_data):
     files = sorted((shared_data / "vhb4910" / "loading-unloading").glob("*.csv"))
     assert len(files) == 16
     for path in files:
-        data = jc.read_test(path, columns=VHB_COLUMNS, length_mm=80)
+        data = jc.read_test(path, columns=VHB_COLUMNS, metadata={"length_mm": 80})
         n = data.num_samples
         assert n == _data_lines(path) and n > 1000, path.name
         for name in ("time", "force", "elongation", "mask", "lines", "force_raw"):
@@ -425,7 +466,7 @@ def test_vhb4910_relaxation(shared_data):
     files = sorted((shared_data / "vhb4910" / "relaxation").glob("*.csv"))
     assert len(files) == 8
     for path in files:
-        data = jc.read_test(path, columns=VHB_COLUMNS, length_mm=80)
+        data = jc.read_test(path, columns=VHB_COLUMNS, metadata={"length_mm": 80})
         n = data.num_samples
         assert n == _data_lines(path) and n > 30000, path.name
         assert data.time.shape == data.elongation.shape == data.mask.shape == (n,)
@@ -446,8 +487,8 @@ def test_vhb4910_header_read_without_columns(shared_data, name):
     # The GBK header 时间,位移,力 (time, displacement, force) over (s),(mm),(N) is
     # matched without `columns`; relaxation/3d0 is UTF-8, unquoted, 20 Hz.
     path = shared_data / "vhb4910" / name
-    by_header = jc.read_test(path, length_mm=80)
-    by_columns = jc.read_test(path, columns=VHB_COLUMNS, length_mm=80)
+    by_header = jc.read_test(path, metadata={"length_mm": 80})
+    by_columns = jc.read_test(path, columns=VHB_COLUMNS, metadata={"length_mm": 80})
     for field in ("time", "force", "elongation", "mask"):
         np.testing.assert_array_equal(
             getattr(by_header, field), getattr(by_columns, field)
