@@ -57,7 +57,8 @@ def _park(cable, duration, ramp_samples):
 def _fit(tests):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", jc.IdentifiabilityWarning)
-        return jc.fit(TRUTH, tests, fit=NAMES, multistart=1, throw=False)
+        problem = jc.Problem(TRUTH, tests, fit=NAMES)
+        return jc.fit(problem, jc.LeastSquares(multistart=1), throw=False)
 
 
 def main():

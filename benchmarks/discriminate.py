@@ -87,7 +87,9 @@ def _refit(fit, tests):
     starts = [fit.model, type(fit.model).wrap(fit.model.base)]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        fits = [jc.fit(m, tests, fit=fit.names, throw=False) for m in starts]
+        fits = [
+            jc.fit(jc.Problem(m, tests, fit=fit.names), throw=False) for m in starts
+        ]
     scores = [bic(f) for f in fits]
     return fits[int(np.nanargmin(scores))]
 

@@ -223,7 +223,8 @@ def _run(name, repeats):
     samples = sum(t.num_samples for t in tests)
 
     def run_jax():
-        return jc.fit(start, tests, fit=names, per_test=per_test, multistart=1)
+        problem = jc.Problem(start, tests, fit=names, per_test=per_test)
+        return jc.fit(problem, jc.LeastSquares(multistart=1))
 
     t0 = time.perf_counter()
     run_jax()

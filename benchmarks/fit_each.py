@@ -189,22 +189,21 @@ def main():
     start, truths, specimens = _specimens(args.specimens, args.samples_per_ramp)
     synthesis_seconds = time.perf_counter() - t0
     n = len(specimens)
-    settings = dict(fit=NAMES, multistart=1)
+    problems = [jc.Problem(start, tests, fit=NAMES) for tests in specimens]
+    method = jc.LeastSquares(multistart=1)
     warnings.simplefilter("ignore", jc.IdentifiabilityWarning)
 
     t0 = time.perf_counter()
-    jc.fit_each(start, specimens, **settings)
+    jc.fit_each(problems, method)
     each_first = time.perf_counter() - t0
-    each_seconds, each = _median(
-        lambda: jc.fit_each(start, specimens, **settings), args.repeats
-    )
+    each_seconds, each = _median(lambda: jc.fit_each(problems, method), args.repeats)
 
-    looped = specimens[: args.loop_specimens or n]
+    looped = problems[: args.loop_specimens or n]
     t0 = time.perf_counter()
-    jc.fit(start, looped[0], throw=False, **settings)
+    jc.fit(looped[0], method, throw=False)
     fit_compile = time.perf_counter() - t0
     t0 = time.perf_counter()
-    loop = [jc.fit(start, tests, throw=False, **settings) for tests in looped]
+    loop = [jc.fit(problem, method, throw=False) for problem in looped]
     fit_per_specimen = (time.perf_counter() - t0) / len(looped)
 
     scipy_looped = specimens[: args.scipy_specimens or n]

@@ -83,7 +83,7 @@ def main():
     t0 = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", jc.IdentifiabilityWarning)
-        fit = jc.fit(model, tests, fit=names, throw=False)
+        fit = jc.fit(jc.Problem(model, tests, fit=names), throw=False)
     t_fit = time.perf_counter() - t0
     meter = jc.TextProgressMeter() if args.progress else jc.NoProgressMeter()
     t0 = time.perf_counter()

@@ -134,7 +134,8 @@ def main():
         t0 = time.perf_counter()
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", jc.IdentifiabilityWarning)
-            fit = jc.fit(START, tests, fit=NAMES, multistart=1, throw=False)
+            problem = jc.Problem(START, tests, fit=NAMES)
+            fit = jc.fit(problem, jc.LeastSquares(multistart=1), throw=False)
         t_fit = time.perf_counter() - t0
         post = jc.sample_posterior(
             START,

@@ -169,7 +169,7 @@ class Problem(eqx.Module):
         `ValueError` naming `model` or `tests`, as [`jaxcable.scaled_start`][].
         """
         # Imported here: the fit imports this module.
-        from ._fit.start import start_scaling
+        from ._fit import start_scaling
 
         model = start_scaling(self.model, self.tests, drive=self.drive).model
         return eqx.tree_at(lambda p: p.model, self, model)

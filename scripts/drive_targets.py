@@ -95,7 +95,8 @@ def main():
     made = [relaxation(strains[0], 1), relaxation(strains[1], 2)]
     made.append(constant_rate(0.5 * sum(strains), 3))
     t0 = time.perf_counter()
-    fit = jc.fit(start, [d for d, _ in made], fit=names, multistart=1)
+    problem = jc.Problem(start, [d for d, _ in made], fit=names)
+    fit = jc.fit(problem, jc.LeastSquares(multistart=1))
     ratios, reproduced = [], []
     for i, (data, sigma) in enumerate(made):
         ratios.append(float(fit.rmse_N[i] / sigma))
@@ -118,7 +119,8 @@ def main():
         tests += [relaxation(strains[0], 10 * seed + 2)[0]]
         tests += [relaxation(strains[1], 10 * seed + 3)[0]]
         t0 = time.perf_counter()
-        r = jc.fit(start, tests, fit=names, multistart=1, throw=False)
+        problem = jc.Problem(start, tests, fit=names)
+        r = jc.fit(problem, jc.LeastSquares(multistart=1), throw=False)
         z = {
             k: float((v - float(getattr(truth, k))) / s)
             for k, v, s in zip(r.names, r.values, r.stderr)

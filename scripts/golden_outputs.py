@@ -38,6 +38,23 @@ import numpy as np
 SHARED = pathlib.Path(__file__).resolve().parent.parent.parent / "shared" / "data"
 
 
+def _problem_api(jc) -> bool:
+    """Whether the tree captured fits a `jaxcable.Problem` (a base from before it
+    takes the model, the tests and keywords)."""
+    import inspect
+
+    return "problem" in inspect.signature(jc.fit).parameters
+
+
+def _fit(jc, model, tests, drive="auto", **method):
+    """`jaxcable.fit` of `model` to `tests` by `drive`, with the `LeastSquares`
+    fields `method`, in the captured tree's API."""
+    if _problem_api(jc):
+        problem = jc.Problem(model, tests, drive=drive)
+        return jc.fit(problem, jc.LeastSquares(**method))
+    return jc.fit(model, tests, drive=drive, **method)
+
+
 def capture(out, stage):
     import jax
 
@@ -188,7 +205,7 @@ def capture(out, stage):
                 print("history skipped", name, e)
         # fit API on bundled data, both drives
         tests = [jc.read_test(p) for p in data[:3]]
-        r = jc.fit(jc.IntegratedModel(), tests, max_steps=15)
+        r = _fit(jc, jc.IntegratedModel(), tests, max_steps=15)
         (out / "api_fit.json").write_text(
             r.to_json() if hasattr(r, "to_json") else str(r)
         )
@@ -201,10 +218,13 @@ def capture(out, stage):
             "start_losses",
         ):
             arrays[f"api_fit/{f}"] = np.asarray(getattr(r, f), float)
-        resp = jc.model_responses(r, tests)
+        if _problem_api(jc):
+            resp = jc.model_responses(r, jc.Problem(r.model, tests))
+        else:
+            resp = jc.model_responses(r, tests)
         for i, x in enumerate(resp):
             arrays[f"api_fit/resp{i}"] = np.asarray(x)
-        r2 = jc.fit(jc.IntegratedModel(), tests, max_steps=10, drive="elongation")
+        r2 = _fit(jc, jc.IntegratedModel(), tests, max_steps=10, drive="elongation")
         (out / "api_fit_elong.json").write_text(r2.to_json())
         # Monte Carlo
         cables = jc.Cable(

@@ -168,18 +168,18 @@ def test_cached_kernels_in_process_match_the_library_fit(tmp_path):
     with jax.enable_x64(True):
         tests = [jc.read_test(p) for p in data]
         tests = [_thin(t, 20) for t in tests]
-        kw = dict(multistart=2, max_steps=30, throw=False)
+        method = jc.LeastSquares(multistart=2, max_steps=30)
         # A stiff dashpot: the thinned tests join samples across 24 h rests, over
         # which the default one creeps past the rope's breaking strain.
-        model = jc.BurgersModel(eta0=1e14)
-        plain = jc.fit(model, tests, **kw)
+        problem = jc.Problem(jc.BurgersModel(eta0=1e14), tests)
+        plain = jc.fit(problem, method, throw=False)
         results = []
         for damage in (False, False, True):
             for p in (tmp_path / "x").glob("fit-*-cache"):
                 if damage:
                     p.write_bytes(b"not a program")
             with cached_fit_kernels(tmp_path / "x"):
-                results.append(jc.fit(model, tests, **kw))
+                results.append(jc.fit(problem, method, throw=False))
     assert len(list((tmp_path / "x").glob("fit-*-cache"))) == 1
     for r in results:
         for name in ("values", "stderr", "start_losses", "rmse_mm"):

@@ -163,9 +163,8 @@ def test_a_fit_through_the_covariate_column_recovers_the_shift():
             jc.TestData(t.time, t.force, noisy, extra=t.extra, metadata=t.metadata)
         )
     start = _model("covariate_shift", 0.005)
-    result = jc.fit(
-        start, tests, fit=["k", "base.E1"], covariate="humidity", multistart=1
-    )
+    problem = jc.Problem(start, tests, fit=["k", "base.E1"], covariate="humidity")
+    result = jc.fit(problem, jc.LeastSquares(multistart=1))
     k = result.names.index("k")
     assert abs(result.values[k] - SIZES["covariate_shift"]) <= 3 * result.stderr[k]
     assert result.stderr[k] < 0.1 * SIZES["covariate_shift"]

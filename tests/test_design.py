@@ -40,7 +40,8 @@ BUDGET = jc.TestBudget(
 
 @pytest.fixture(scope="module")
 def burgers_fit(creep_csv):
-    return jc.fit(TRUTH, [jc.read_test(creep_csv)], multistart=1)
+    problem = jc.Problem(TRUTH, [jc.read_test(creep_csv)])
+    return jc.fit(problem, jc.LeastSquares(multistart=1))
 
 
 @pytest.fixture(scope="module")
@@ -124,7 +125,8 @@ def test_lack_of_fit_is_the_refitted_residual():
 def separating(burgers_fit, creep_csv):
     # A rival that cannot creep: the test that separates it from Burgers holds the
     # load.
-    hooke = jc.fit(jc.HookeModel(), [jc.read_test(creep_csv)], multistart=1)
+    problem = jc.Problem(jc.HookeModel(), [jc.read_test(creep_csv)])
+    hooke = jc.fit(problem, jc.LeastSquares(multistart=1))
     return jc.design_test((burgers_fit, hooke), budget=BUDGET, cable=CABLE, steps=2)
 
 

@@ -93,7 +93,8 @@ def test_missing_covariate_column_names_the_test():
 def hidden():
     true = jc.DiscoveredTerm(BASE, theta0=THETA, terms=(TERM,))
     tests = _tests(true)
-    base_fit = jc.fit(BASE, _train(tests), fit=BASE_FIT, drive="force", multistart=1)
+    problem = jc.Problem(BASE, _train(tests), fit=BASE_FIT, drive="force")
+    base_fit = jc.fit(problem, jc.LeastSquares(multistart=1))
     return true, tests, base_fit
 
 
@@ -119,7 +120,8 @@ def test_discover_finds_a_hidden_mechano_sorptive_term(hidden):
 
 
 def _rmse(model, tests, held):
-    response = jc.model_responses(model, tests, drive="force", covariate="humidity")
+    problem = jc.Problem(model, tests, drive="force", covariate="humidity")
+    response = jc.model_responses(model, problem)
     sq = sum(
         float(np.sum((r - t.elongation)[h] ** 2))
         for r, t, h in zip(response, tests, held)
@@ -129,7 +131,8 @@ def _rmse(model, tests, held):
 
 def test_discover_finds_nothing_in_noise():
     tests = _tests(BASE)
-    base_fit = jc.fit(BASE, _train(tests), fit=BASE_FIT, drive="force", multistart=1)
+    problem = jc.Problem(BASE, _train(tests), fit=BASE_FIT, drive="force")
+    base_fit = jc.fit(problem, jc.LeastSquares(multistart=1))
     found = jc.discover(base_fit, tests, covariate="humidity")
     assert found.terms == () or abs(found.gain_pct) < 5, found.path
     assert found.fit is None or found.gain_pct < 5
@@ -159,7 +162,8 @@ def test_discover_finds_cyclic_softening_without_a_covariate():
     theta = 1e-11  # 1/Pa: ~1e-3 strain after the six cycles at 100 N
     true = jc.DiscoveredTerm(BASE, terms=("sigma_cycles_rate",), theta0=theta)
     tests = _tests(true, covariate=False)
-    base_fit = jc.fit(BASE, _train(tests), fit=BASE_FIT, drive="force", multistart=1)
+    problem = jc.Problem(BASE, _train(tests), fit=BASE_FIT, drive="force")
+    base_fit = jc.fit(problem, jc.LeastSquares(multistart=1))
     found = jc.discover(base_fit, tests)
     assert "sigma_cycles_rate" in found.terms, found.path
     k = found.terms.index("sigma_cycles_rate")
@@ -223,7 +227,8 @@ def test_discover_finds_a_damage_that_runs_away():
         BASE, terms=("compliance_cycles",), theta0=5e-14, rate0=4.0, accel0=accel
     )
     tests = _tests(true, covariate=False)
-    base_fit = jc.fit(BASE, _train(tests), fit=BASE_FIT, drive="force", multistart=1)
+    problem = jc.Problem(BASE, _train(tests), fit=BASE_FIT, drive="force")
+    base_fit = jc.fit(problem, jc.LeastSquares(multistart=1))
     found = jc.discover(base_fit, tests)
     assert "compliance_cycles" in found.terms, found.path
     k = found.terms.index("compliance_cycles")

@@ -94,7 +94,8 @@ def displacement_tests():
 
 @pytest.fixture(scope="module")
 def displacement_fit(displacement_tests):
-    return jc.fit(START, [t for t, _ in displacement_tests], multistart=1)
+    problem = jc.Problem(START, [t for t, _ in displacement_tests])
+    return jc.fit(problem, jc.LeastSquares(multistart=1))
 
 
 def test_metadata_names_the_control():
@@ -227,7 +228,7 @@ def test_mixed_fit_recovers_the_parameters(seed):
         relaxation(0.01, 10 * seed + 2)[0],
         relaxation(0.02, 10 * seed + 3)[0],
     ]
-    result = jc.fit(START, tests, multistart=1)
+    result = jc.fit(jc.Problem(START, tests), jc.LeastSquares(multistart=1))
     assert result.converged
     assert _names(result.drives) == ("force", "force", "elongation", "elongation")
     assert result.loss_unit == "1"
@@ -303,7 +304,9 @@ def test_a_start_that_fails_says_why():
     with pytest.raises(
         ValueError, match=r"tests\[0\] \(far, elongation-driven\).*above 1"
     ):
-        jc.fit(jc.IntegratedModel(), [data], fit=["E1c"], drive="elongation")
+        jc.fit(
+            jc.Problem(jc.IntegratedModel(), [data], fit=["E1c"], drive="elongation")
+        )
 
 
 def test_report_of_a_displacement_controlled_fit(
@@ -324,7 +327,7 @@ def test_report_of_a_displacement_controlled_fit(
         np.testing.assert_allclose(float(cells[6]), rmse, rtol=1e-5)
     summary = (tmp_path / "summary.md").read_text()
     assert "N^2" in summary and "| elongation |" in summary
-    responses = jc.model_responses(displacement_fit, tests)
+    responses = jc.model_responses(displacement_fit, jc.Problem(START, tests))
     for test, force, rmse in zip(tests, responses, displacement_fit.rmse_N):
         np.testing.assert_allclose(
             np.sqrt(np.mean((force - test.force) ** 2)), rmse, rtol=1e-8

@@ -71,10 +71,10 @@ def _perturbed(model, names, factors):
     )
 
 
-def _fit_quietly(*args, **kwargs):
+def _fit_quietly(problem, method=jc.LeastSquares(), **kwargs):
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        result = jc.fit(*args, **kwargs)
+        result = jc.fit(problem, method, **kwargs)
     flagged = [w for w in caught if issubclass(w.category, jc.IdentifiabilityWarning)]
     return result, flagged
 
@@ -153,7 +153,8 @@ def test_recovers_known_parameters(case):
     true, names, factors = _CASES[case]
     tests = _tests(true)
     result, flagged = _fit_quietly(
-        _perturbed(true, names, factors), tests, fit=names, multistart=2
+        jc.Problem(_perturbed(true, names, factors), tests, fit=names),
+        jc.LeastSquares(multistart=2),
     )
     assert result.converged, result.message
     assert not flagged, [str(w.message) for w in flagged]
@@ -183,7 +184,9 @@ def test_per_test_parameter():
     truths = [jc.BurgersModel(E1=1.8e9, **shared), jc.BurgersModel(E1=2.6e9, **shared)]
     tests = _tests(truths)
     start = jc.BurgersModel(E1=1e9, eta0=4e11, E2=8e8, eta2=2e10)
-    result, flagged = _fit_quietly(start, tests, per_test=["E1"], multistart=2)
+    result, flagged = _fit_quietly(
+        jc.Problem(start, tests, per_test=["E1"]), jc.LeastSquares(multistart=2)
+    )
     assert result.converged and not flagged
     assert result.names == ("E1[0]", "E1[1]", "eta0", "E2", "eta2")
     _assert_recovered(
@@ -207,7 +210,9 @@ def test_mask_excludes_samples():
         garbage = np.where(mask, t.elongation, 1.0)
         masked.append(dataclasses.replace(t, elongation=garbage, mask=mask))
     start = jc.HookeModel(E=1e9)
-    result, _ = _fit_quietly(start, masked, fit=["E"], multistart=2)
+    result, _ = _fit_quietly(
+        jc.Problem(start, masked, fit=["E"]), jc.LeastSquares(multistart=2)
+    )
     assert result.num_samples.tolist() == [t.num_samples - 20 for t in clean]
     assert abs(result.values[0] - 2.5e9) < 3 * result.stderr[0]
     assert result.rmse_mm[0] < 2e3 * NOISE
@@ -219,8 +224,9 @@ def test_reproducible_and_json_round_trip(tmp_path):
     true = jc.HookeModel(E=2.5e9)
     tests = _tests(true)
     start = jc.HookeModel(E=1e9)
-    a, _ = _fit_quietly(start, tests, fit=["E"], multistart=2, key=jax.random.key(3))
-    b, _ = _fit_quietly(start, tests, fit=["E"], multistart=2, key=jax.random.key(3))
+    problem = jc.Problem(start, tests, fit=["E"])
+    a, _ = _fit_quietly(problem, jc.LeastSquares(multistart=2, key=jax.random.key(3)))
+    b, _ = _fit_quietly(problem, jc.LeastSquares(multistart=2, key=jax.random.key(3)))
     np.testing.assert_array_equal(a.values, b.values)
     np.testing.assert_array_equal(a.start_losses, b.start_losses)
 
@@ -249,7 +255,11 @@ def test_result_of_a_fit_that_did_not_converge():
     """A fit cut short reports its solver's result as a `jaxcable.RESULTS` member
     (optimistix's, promoted), kept by PARAMS.json by name; `throw=True` raises."""
     start, tests = jc.HookeModel(E=1e7), _some_tests()
-    result, _ = _fit_quietly(start, tests, fit=["E"], max_steps=1, throw=False)
+    problem, cut_short = (
+        jc.Problem(start, tests, fit=["E"]),
+        jc.LeastSquares(max_steps=1),
+    )
+    result, _ = _fit_quietly(problem, cut_short, throw=False)
     assert result.result == jc.RESULTS.nonlinear_max_steps_reached
     assert not result.converged
     assert result.message == str(jc.RESULTS[result.result])
@@ -264,13 +274,13 @@ def test_result_of_a_fit_that_did_not_converge():
     older = jc.FitResult.from_json(json.dumps(document))
     assert older.result == result.result
     with pytest.raises(RuntimeError, match="no start converged"):
-        _fit_quietly(start, tests, fit=["E"], max_steps=1)
+        _fit_quietly(problem, cut_short)
 
 
 def test_json_per_test_round_trip():
     """A per-test parameter is written as a list and read back as a batch."""
     result, _ = _fit_quietly(
-        jc.HookeModel(E=1e9), _tests(jc.HookeModel(E=2.5e9)), per_test=["E"]
+        jc.Problem(jc.HookeModel(E=1e9), _tests(jc.HookeModel(E=2.5e9)), per_test=["E"])
     )
     back = jc.FitResult.from_json(result.to_json())
     assert back.model.E.shape == (2,)
@@ -290,7 +300,9 @@ def test_warns_on_flow_from_tests_of_minutes():
     tests = _tests(true, designs=((0.3, 100.0, 0), (0.1, 150.0, 0)))
     names = ("E2r", "E3r", "eta0")
     with pytest.warns(jc.IdentifiabilityWarning) as caught:
-        result = jc.fit(true, tests, fit=names, multistart=1, max_steps=16, throw=False)
+        problem = jc.Problem(true, tests, fit=names)
+        method = jc.LeastSquares(multistart=1, max_steps=16)
+        result = jc.fit(problem, method, throw=False)
     text = " ".join(str(w.message) for w in caught)
     assert "eta0" in text
     assert "E2r" not in text and "E3r" not in text
@@ -311,7 +323,7 @@ def test_warns_on_flow_from_tests_of_minutes():
     # throw=True the error carries the diagnosis (same compiled kernel).
     assert not result.converged
     with pytest.raises(RuntimeError, match="eta0"):
-        jc.fit(true, tests, fit=names, multistart=1, max_steps=16)
+        jc.fit(problem, method)
 
 
 @pytest.mark.slow
@@ -322,7 +334,11 @@ def test_warns_on_exact_degeneracy():
     names = ("E", "sigma_y", "z_y", "beta", "gamma")
     start = _perturbed(true, names, (0.7, 1.4, 0.75, 0.8, 0.5))
     with pytest.warns(jc.IdentifiabilityWarning) as caught:
-        result = jc.fit(start, _tests(true), fit=names, multistart=1, throw=False)
+        result = jc.fit(
+            jc.Problem(start, _tests(true), fit=names),
+            jc.LeastSquares(multistart=1),
+            throw=False,
+        )
     rule3 = [str(w.message) for w in caught if "near-zero singular" in str(w.message)]
     assert len(rule3) == 1
     for name in ("sigma_y", "z_y", "beta"):
@@ -338,7 +354,7 @@ def test_warns_on_exact_degeneracy():
 def test_make_loss_and_residuals():
     true = jc.HookeModel(E=2.5e9)
     tests = _tests(true)
-    loss, params, to_model = jc.make_loss(jc.HookeModel(E=1e9), tests)
+    loss, params, to_model = jc.make_loss(jc.Problem(jc.HookeModel(E=1e9), tests))
     assert set(params) == {"E"}
     np.testing.assert_allclose(params["E"], np.log(1e9))
     assert float(to_model(params).E) == pytest.approx(1e9)
@@ -409,12 +425,15 @@ def _some_tests():
         (dict(solver="lm"), "`solver`"),
     ],
 )
-def test_bad_inputs_raise_value_error(kwargs, match):
+def test_bad_inputs_raise_naming_the_field(kwargs, match):
     args = dict(model=jc.HookeModel(E=1e9), tests=_some_tests())
     args.update(kwargs)
-    model, tests = args.pop("model"), args.pop("tests")
-    with pytest.raises(ValueError, match=match):
-        jc.fit(model, tests, **args)
+    fields = ("multistart", "max_steps", "spread", "solver")
+    method = {k: args.pop(k) for k in fields if k in args}
+    # The values refuse their own fields when they are made (the model's class:
+    # TypeError), the fit what only the tests can tell.
+    with pytest.raises((ValueError, TypeError), match=match):
+        jc.fit(jc.Problem(**args), jc.LeastSquares(**method))
 
 
 def test_bad_model_for_the_tests():
@@ -422,7 +441,7 @@ def test_bad_model_for_the_tests():
     model = jc.IntegratedModel(lambda2=5e4)
     tests = _tests(jc.HookeModel(E=2.5e9))
     with pytest.raises(ValueError, match=r"`model`.*tests\[1\] \(100mm-150N\)"):
-        jc.fit(model, tests, fit=["E1c"])
+        jc.fit(jc.Problem(model, tests, fit=["E1c"]))
 
 
 def test_bad_tests_raise_value_error():
@@ -462,13 +481,10 @@ def test_early_stop_keeps_the_minimum():
     true, names, _ = _CASES["burgers"]
     start = _perturbed(true, names, (1.3, 0.7, 1.4, 0.8))
     tests = _tests(true)
-    early, _ = _fit_quietly(start, tests, fit=names, multistart=1)
+    problem = jc.Problem(start, tests, fit=names)
+    early, _ = _fit_quietly(problem, jc.LeastSquares(multistart=1))
     plain, _ = _fit_quietly(
-        start,
-        tests,
-        fit=names,
-        multistart=1,
-        solver=Plain(rtol=1e-6, atol=1e-6),
+        problem, jc.LeastSquares(solver=Plain(rtol=1e-6, atol=1e-6), multistart=1)
     )
     assert early.converged and plain.converged
     assert early.num_steps < plain.num_steps

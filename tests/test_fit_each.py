@@ -68,18 +68,23 @@ SPECIMENS = [
     _specimen((1.3, 0.8, 1.1, 1.0), 1),
     _specimen((0.8, 1.2, 0.9, 1.3), 2),
 ]
-SETTINGS = dict(fit=NAMES, multistart=2)
+METHOD = jc.LeastSquares(multistart=2)
+
+
+def _problems(specimens, **fields):
+    """One problem per specimen: START and its tests, NAMES fitted."""
+    return [jc.Problem(START, tests, **{"fit": NAMES, **fields}) for tests in specimens]
 
 
 @pytest.fixture(scope="module")
 def each():
-    return jc.fit_each(START, SPECIMENS, **SETTINGS)
+    return jc.fit_each(_problems(SPECIMENS), METHOD)
 
 
 def test_each_specimen_equals_its_own_fit(each):
     assert len(each) == len(SPECIMENS)
-    for tests, result in zip(SPECIMENS, each):
-        alone = jc.fit(START, tests, **SETTINGS)
+    for problem, result in zip(_problems(SPECIMENS), each):
+        alone = jc.fit(problem, METHOD)
         assert result.result == jc.RESULTS.successful
         assert result.names == alone.names
         np.testing.assert_allclose(result.values, alone.values, rtol=1e-6)
@@ -97,8 +102,8 @@ def test_a_failing_specimen_returns_the_others(each):
     # that start; here the specimen fails alone, with the simulation's result.
     broken = _specimen((1.3, 0.8, 1.1, 1.0), 1, breaking_strain=1e-4)
     with pytest.raises(ValueError, match="start parameters fail"):
-        jc.fit(START, broken, **SETTINGS)
-    results = jc.fit_each(START, [SPECIMENS[0], broken, SPECIMENS[2]], **SETTINGS)
+        jc.fit(jc.Problem(START, broken, fit=NAMES), METHOD)
+    results = jc.fit_each(_problems([SPECIMENS[0], broken, SPECIMENS[2]]), METHOD)
     assert results[1].result == jc.RESULTS.strain_beyond_break
     assert not results[1].converged and np.all(np.isnan(results[1].values))
     assert results[1].names == each[1].names
@@ -108,7 +113,8 @@ def test_a_failing_specimen_returns_the_others(each):
 
 
 def test_a_solve_that_does_not_converge_is_reported():
-    results = jc.fit_each(START, SPECIMENS[:1], fit=NAMES, multistart=1, max_steps=2)
+    method = jc.LeastSquares(multistart=1, max_steps=2)
+    results = jc.fit_each(_problems(SPECIMENS[:1]), method)
     assert results[0].result == jc.RESULTS.nonlinear_max_steps_reached
     assert np.all(np.isfinite(results[0].values))
 
@@ -117,36 +123,49 @@ def test_specimens_of_other_shapes_and_per_test_parameters():
     # One specimen of one test beside one of two: two kernels, each specimen
     # still its own fit, E1 fitted per test.
     specimens = [SPECIMENS[0], SPECIMENS[1][:1]]
-    settings = dict(fit=NAMES[1:], per_test=["E1"], multistart=1)
-    results = jc.fit_each(START, specimens, **settings)
-    for tests, result in zip(specimens, results):
-        alone = jc.fit(START, tests, **settings)
+    problems = _problems(specimens, fit=NAMES[1:], per_test=["E1"])
+    method = jc.LeastSquares(multistart=1)
+    results = jc.fit_each(problems, method)
+    for problem, result in zip(problems, results):
+        alone = jc.fit(problem, method)
         assert result.names == alone.names
         np.testing.assert_allclose(result.values, alone.values, rtol=1e-6)
     assert results[0].names[:2] == ("E1[0]", "E1[1]")
 
 
+_ONE = jc.Problem(START, SPECIMENS[0], fit=NAMES)
+
+
 @pytest.mark.parametrize(
     "kwargs, error, match",
     [
-        (dict(specimens=SPECIMENS[0][0]), ValueError, "`specimens`"),
-        (dict(specimens=[]), ValueError, "`specimens` is empty"),
-        (dict(specimens=[SPECIMENS[0], "a.csv"]), ValueError, r"`specimens\[1\]`"),
-        (dict(model="burgers"), ValueError, "`model`"),
+        (dict(problems=_ONE), ValueError, "`problems`"),
+        (dict(problems=[]), ValueError, "`problems` is empty"),
+        (dict(problems=[_ONE, "a.csv"]), ValueError, r"`problems\[1\]`"),
+        (
+            dict(problems=[_ONE, jc.Problem(START, SPECIMENS[1])]),
+            ValueError,
+            r"`problems\[1\]\.fit`",
+        ),
+        (
+            dict(problems=[_ONE, jc.Problem(TRUTH, SPECIMENS[1], fit=NAMES)]),
+            ValueError,
+            r"`problems\[1\]\.model`",
+        ),
         (dict(fit=("E1", "nope")), ValueError, "`fit`"),
         (dict(drive=["force"]), ValueError, "`drive`"),
-        (dict(multistart=0), ValueError, "`multistart`"),
-        (dict(max_steps=0), ValueError, "`max_steps`"),
-        (dict(key=7), TypeError, "`key`"),
+        (dict(method="lm"), TypeError, "`method`"),
+        (dict(method=jc.LeastSquares(key=7)), TypeError, "`key`"),
         (dict(progress_meter="bar"), ValueError, "`progress_meter`"),
     ],
 )
 def test_bad_arguments_are_named(kwargs, error, match):
-    arguments = dict(model=START, specimens=SPECIMENS[:2], fit=NAMES)
+    kwargs = dict(kwargs)
+    fields = {k: kwargs.pop(k) for k in ("fit", "drive") if k in kwargs}
+    arguments = dict(problems=_problems(SPECIMENS[:2], **fields), method=METHOD)
     arguments.update(kwargs)
-    model, specimens = arguments.pop("model"), arguments.pop("specimens")
     with pytest.raises(error, match=match):
-        jc.fit_each(model, specimens, **arguments)
+        jc.fit_each(**arguments)
 
 
 def test_a_malformed_specimen_is_named():
@@ -158,8 +177,8 @@ def test_a_malformed_specimen_is_named():
             metadata={"length_mm": 300.0},
         )
     ]
-    with pytest.raises(ValueError, match=r"`specimens\[1\]`.*fitted samples"):
-        jc.fit_each(START, [SPECIMENS[0], short], fit=NAMES)
+    with pytest.raises(ValueError, match=r"`problems\[1\]`.*fitted samples"):
+        jc.fit_each(_problems([SPECIMENS[0], short]))
 
 
 def test_cli_fit_each(tmp_path):

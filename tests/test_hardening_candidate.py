@@ -90,7 +90,7 @@ def test_fit_runs_at_the_true_diameter(plain):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", jc.IdentifiabilityWarning)
         with pytest.warns(jc.StartMovedWarning):
-            r = jc.fit(jc.IntegratedModel(), plain)
+            r = jc.fit(jc.Problem(jc.IntegratedModel(), plain))
     assert r.converged and r.start_note
     assert r.rmse_mm[0] < 1.5 * _NOISE_M * 1e3
 

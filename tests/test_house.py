@@ -28,7 +28,8 @@ LAYERS = [
     {"_models"},
     {"_drive"},
     {"_io"},
-    {"_fit"},
+    # The problem and method values sit beside the fit, which takes them.
+    {"_fit", "_problem"},
     {"_diagnose", "_montecarlo", "_papers", "_uncertainty"},
     {"_report"},
     {"_cli", "cdpr", "cli", "papers", "states", "__init__", "__main__"},

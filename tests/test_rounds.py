@@ -19,7 +19,6 @@ from jaxcable._diagnose import (
 )
 from jaxcable._diagnose.library import memory_library
 from jaxcable._diagnose.verdict import diverges
-from jaxcable._fit import model_responses
 from jaxcable._fit.serialize import model_document, model_from_document
 
 
@@ -183,7 +182,8 @@ def humid_test():
     )
     h = 50.0 + 20.0 * np.sin(2 * np.pi * np.asarray(t.time) / 1800.0)
     t = dataclasses.replace(t, extra={**(t.extra or {}), "h": h})
-    strain = np.asarray(model_responses(base, [t], drive="force")[0]) / 0.3
+    problem = jc.Problem(base, [t], drive="force")
+    strain = np.asarray(jc.model_responses(base, problem)[0]) / 0.3
     return base, t, strain
 
 
@@ -192,7 +192,12 @@ def test_memory_terms_integrate_their_columns(humid_test, term, rate, theta):
     base, t, strain = humid_test
     model = jc.DiscoveredTerm(base, terms=(term,), theta0=theta, rate0=rate)
     added = (
-        np.asarray(model_responses(model, [t], drive="force", covariate="h")[0]) / 0.3
+        np.asarray(
+            jc.model_responses(
+                model, jc.Problem(model, [t], drive="force", covariate="h")
+            )[0]
+        )
+        / 0.3
         - strain
     )
     column = memory_library(t, "h", strain, [(term, rate, 0.0)])[(term, rate, 0.0)]
@@ -213,7 +218,8 @@ def test_a_damage_scales_the_base_strain_or_the_stress(humid_test, term, theta, 
     model = jc.DiscoveredTerm(
         base, terms=(term,), theta0=theta, rate0=2.0, accel0=accel
     )
-    added = np.asarray(model_responses(model, [t], drive="force")[0]) / 0.3 - strain
+    problem = jc.Problem(model, [t], drive="force")
+    added = np.asarray(jc.model_responses(model, problem)[0]) / 0.3 - strain
     key, flat = (term, 2.0, accel), (term, 2.0, 0.0)
     columns = memory_library(t, None, strain, [key, flat])
     column, linear = columns[key], columns[flat]

@@ -42,7 +42,8 @@ def tests():
 def test_a_subset_fit_equals_the_plain_fit(tests, free):
     layout = shared_layout(BURGERS, tests, ALL, drive="force")
     shared = fit_subset(BURGERS, tests, layout, free, size=4, drive="force")
-    plain = jc.fit(BURGERS, tests, fit=free, multistart=1, drive="force")
+    problem = jc.Problem(BURGERS, tests, fit=free, drive="force")
+    plain = jc.fit(problem, jc.LeastSquares(multistart=1))
     assert shared.names == plain.names == free
     np.testing.assert_allclose(shared.values, plain.values, rtol=1e-6)
     np.testing.assert_allclose(shared.stderr, plain.stderr, rtol=1e-4)
@@ -82,9 +83,8 @@ def test_the_stack_reproduces_each_candidate_alone(tests):
             throw=False,
         )
         alone = BURGERS if active is None else jc.EXTENSIONS[active].wrap(BURGERS)
-        plain = jc.fit(
-            alone, tests, fit=result.names, multistart=1, drive="force", throw=False
-        )
+        problem = jc.Problem(alone, tests, fit=result.names, drive="force")
+        plain = jc.fit(problem, jc.LeastSquares(multistart=1), throw=False)
         assert type(result.model) is type(alone)
         assert result.converged == plain.converged
         np.testing.assert_allclose(result.loss, plain.loss, rtol=1e-6)

@@ -87,7 +87,7 @@ def test_a_start_beyond_break_is_moved_by_diagnose(stiff_joint):
 
 def test_a_start_beyond_break_is_moved_by_fit(stiff_joint):
     with pytest.warns(jc.StartMovedWarning):
-        r = jc.fit(jc.BurgersModel(), stiff_joint)
+        r = jc.fit(jc.Problem(jc.BurgersModel(), stiff_joint))
     assert r.converged
     assert "tests[0]" in r.start_note and "moduli x" in r.start_note
     assert "start moved" in r.summary()
@@ -96,7 +96,7 @@ def test_a_start_beyond_break_is_moved_by_fit(stiff_joint):
     # A start that works is the start as given: nothing moved.
     with warnings.catch_warnings():
         warnings.simplefilter("error", jc.StartMovedWarning)
-        again = jc.fit(r.model, stiff_joint)
+        again = jc.fit(jc.Problem(r.model, stiff_joint))
     assert again.start_note == ""
 
 
