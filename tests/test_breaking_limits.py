@@ -83,7 +83,7 @@ def test_a_file_gives_its_limits(tmp_path):
     )
     # The option replaces the file's value, inf included.
     with pytest.warns(jc.MetadataConflictWarning, match="breaking_strain=inf given"):
-        given = jc.read_test(both, breaking_strain=math.inf).cable()
+        given = jc.read_test(both, metadata={"breaking_strain": math.inf}).cable()
     assert float(given.breaking_strain) == math.inf
 
 

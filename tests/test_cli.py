@@ -456,7 +456,7 @@ def test_fit_report_models_match_the_fit(burgers_fit):
 
     *_, files, params, _ = burgers_fit
     result = jc.FitResult.from_json(params)
-    tests = [jc.read_test(f, detect_slack=False) for f in files]
+    tests = [jc.read_test(f, options=jc.ReadOptions(detect_slack=False)) for f in files]
     for test, e, rmse in zip(tests, model_elongations(result, tests), result.rmse_mm):
         np.testing.assert_allclose(
             1e3 * np.sqrt(np.mean((e - test.elongation) ** 2)), rmse, rtol=1e-8

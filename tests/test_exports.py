@@ -139,7 +139,9 @@ def test_export_reads_as_it_comes(row):
     path = EXPORTS / name
     # The columns as written: no correction of the load cell's sign or offset.
     data = jc.read_test(
-        path, length_mm=length_mm, detect_slack=False, force_sign=1, tare=False
+        path,
+        metadata={"length_mm": length_mm},
+        options=jc.ReadOptions(detect_slack=False, force_sign=1, tare=False),
     )
     time, force, elongation = _own_columns(path, sep, first, spec)
     np.testing.assert_allclose(data.time, time, rtol=1e-12, atol=0)
@@ -148,7 +150,9 @@ def test_export_reads_as_it_comes(row):
     assert data.lines[0] == first
     for key, value in metadata.items():
         assert data.metadata[key] == value
-    detected = resolve_control(jc.read_test(path, length_mm=length_mm), None)
+    detected = resolve_control(
+        jc.read_test(path, metadata={"length_mm": length_mm}), None
+    )
     if control is None:
         assert "ambiguous" in detected.reason
     else:
@@ -197,7 +201,7 @@ def test_bluehill_units_row_is_not_the_header(tmp_path):
     text, t, e, f = _bluehill_relaxation()
     path = tmp_path / "Specimen_RawData_1.csv"
     path.write_bytes(text.encode())
-    data = jc.read_test(path, detect_slack=False)
+    data = jc.read_test(path, options=jc.ReadOptions(detect_slack=False))
     np.testing.assert_allclose(data.time, t)
     np.testing.assert_allclose(data.elongation, e * 1e-3, rtol=1e-12)
     np.testing.assert_allclose(data.force, f, atol=5e-6)
@@ -218,7 +222,7 @@ def test_stress_without_force(tmp_path):
     text, t, e, f = _bluehill_relaxation(stress_only=True)
     path = tmp_path / "stress.csv"
     path.write_bytes(text.encode())
-    data = jc.read_test(path, detect_slack=False)
+    data = jc.read_test(path, options=jc.ReadOptions(detect_slack=False))
     np.testing.assert_allclose(data.force, f, rtol=1e-5, atol=1e-4)
     np.testing.assert_allclose(data.elongation, e * 1e-3, rtol=1e-4, atol=1e-9)
     path.write_bytes(text.replace("Diameter", "Width").encode())
@@ -227,7 +231,11 @@ def test_stress_without_force(tmp_path):
     message = str(error.value)
     assert "\n" not in message and "'Tensile stress (MPa)'" in message
     assert "diameter_mm=" in message and "--diameter-mm" in message
-    given = jc.read_test(path, diameter_mm=0.399, detect_slack=False)
+    given = jc.read_test(
+        path,
+        metadata={"diameter_mm": 0.399},
+        options=jc.ReadOptions(detect_slack=False),
+    )
     np.testing.assert_allclose(given.force, data.force)
 
 
@@ -243,7 +251,9 @@ def test_stress_without_force(tmp_path):
 def test_comment_under_the_header_skips_no_row(tmp_path, head):
     path = tmp_path / "comment.csv"
     path.write_text(head + "0,0,0\n1,2,0.1\n2,4,0.2\n3,6,0.3\n")
-    data = jc.read_test(path, length_mm=10, detect_slack=False)
+    data = jc.read_test(
+        path, metadata={"length_mm": 10}, options=jc.ReadOptions(detect_slack=False)
+    )
     np.testing.assert_array_equal(data.time, [0, 1, 2, 3])
     np.testing.assert_array_equal(data.force, [0, 2, 4, 6])
 
@@ -251,20 +261,37 @@ def test_comment_under_the_header_skips_no_row(tmp_path, head):
 @pytest.mark.parametrize(
     "call, argument",
     [
-        (lambda p: jc.read_test(p, encoding=5), "encoding"),
-        (lambda p: jc.read_test(p, encoding=""), "encoding"),
-        (lambda p: jc.read_test(p, delimiter=4), "delimiter"),
+        (lambda p: jc.read_test(p, options=jc.ReadOptions(encoding=5)), "encoding"),
+        (lambda p: jc.read_test(p, options=jc.ReadOptions(encoding="")), "encoding"),
+        (lambda p: jc.read_test(p, options=jc.ReadOptions(delimiter=4)), "delimiter"),
         (lambda p: jc.read_test(p, columns=3), "columns"),
         (lambda p: jc.read_test(p, columns=[]), "columns"),
-        (lambda p: jc.read_test(p, skip_rows="2"), "skip_rows"),
-        (lambda p: jc.read_test(p, skip_rows=-1), "skip_rows"),
-        (lambda p: jc.read_test(p, length_mm=[1]), "length_mm"),
-        (lambda p: jc.read_test(p, length_mm=-1), "length_mm"),
-        (lambda p: jc.read_test(p, material=3), "material"),
-        (lambda p: jc.read_test(p, detect_slack="no"), "detect_slack"),
-        (lambda p: jc.read_test(p, slack_threshold_N="1"), "slack_threshold_N"),
-        (lambda p: jc.read_test(p, slack_threshold_N=float("nan")), "threshold_N"),
+        (lambda p: jc.read_test(p, options=jc.ReadOptions(skip_rows="2")), "skip_rows"),
+        (lambda p: jc.read_test(p, options=jc.ReadOptions(skip_rows=-1)), "skip_rows"),
+        (lambda p: jc.read_test(p, metadata={"length_mm": [1]}), "length_mm"),
+        (lambda p: jc.read_test(p, metadata={"length_mm": -1}), "length_mm"),
+        (lambda p: jc.read_test(p, metadata={"material": 3}), "material"),
+        (
+            lambda p: jc.read_test(p, options=jc.ReadOptions(detect_slack="no")),
+            "detect_slack",
+        ),
+        (
+            lambda p: jc.read_test(p, options=jc.ReadOptions(slack_threshold_N="1")),
+            "slack_threshold_N",
+        ),
+        (
+            lambda p: jc.read_test(
+                p, options=jc.ReadOptions(slack_threshold_N=float("nan"))
+            ),
+            "threshold_N",
+        ),
         (lambda p: jc.read_test(3), "path"),
+        (lambda p: jc.read_test(p, metadata={"lenght_mm": 10}), "metadata"),
+        (lambda p: jc.read_test(p, metadata=[("length_mm", 10)]), "metadata"),
+        (lambda p: jc.read_test(p, options={"tare": False}), "options"),
+        (lambda p: jc.ReadOptions(tare="no"), "tare"),
+        (lambda p: jc.ReadOptions(frequency_hz=0.0), "frequency_hz"),
+        (lambda p: jc.ReadOptions(force_sign=2), "force_sign"),
         (lambda p: jc.read_csv(p, length_mm="x"), "length_mm"),
         (lambda p: jc.read_csv(None), "path"),
         (lambda p: jc.write_csv(p, "data"), "data"),

@@ -52,7 +52,7 @@ def _bluehill(length="14.33000,mm", rate="5.00000,mm/min", control=None):
 
 def test_bluehill(tmp_path):
     path = _write(tmp_path, "bluehill.csv", _bluehill(), newline="\r\n")
-    data = jc.read_test(path, detect_slack=False)
+    data = jc.read_test(path, options=jc.ReadOptions(detect_slack=False))
     _check_rows(data)
     assert data.metadata["length_mm"] == 14.33
     assert data.metadata["diameter_mm"] == 0.5
@@ -104,7 +104,9 @@ def test_metadata_without_known_unit_is_located(tmp_path):
     assert f"{path}, line 4" in message and "'ft' unknown" in message
     assert "--length-mm" in message
     # Given by the caller, the file's length is not needed.
-    assert jc.read_test(path, length_mm=14.33).metadata["length_mm"] == 14.33
+    assert (
+        jc.read_test(path, metadata={"length_mm": 14.33}).metadata["length_mm"] == 14.33
+    )
 
 
 def test_zwick_german_decimal_comma(tmp_path):
@@ -178,9 +180,11 @@ def test_shimadzu_trapezium(tmp_path, encoding):
     path = _write(tmp_path, "shimadzu.csv", text, encoding=encoding)
     if encoding != "utf-8":
         # Shift-JIS is not among the encodings detected: the caller names it.
-        data = jc.read_test(path, length_mm=100, encoding=encoding)
+        data = jc.read_test(
+            path, metadata={"length_mm": 100}, options=jc.ReadOptions(encoding=encoding)
+        )
     else:
-        data = jc.read_test(path, length_mm=100)
+        data = jc.read_test(path, metadata={"length_mm": 100})
     _check_rows(data)
     assert data.metadata["rate_mm_per_min"] == 3.0
 
@@ -189,7 +193,7 @@ def test_unknown_layout_one_located_line(tmp_path):
     text = "Specimen 1\nZeitpunkt,Kanal 2,Kraft\n(s),(mm),(lb·ft)\n0,0,0\n1,1,1\n"
     path = _write(tmp_path, "unknown.csv", text)
     with pytest.raises(ValueError) as error:
-        jc.read_test(path, length_mm=1)
+        jc.read_test(path, metadata={"length_mm": 1})
     message = str(error.value)
     assert "\n" not in message
     assert message.startswith(f"{path}, line 2:")
@@ -201,14 +205,14 @@ def test_unknown_layout_one_located_line(tmp_path):
     text = "Time,Load,Force\ns,N,kN\n0,0,0\n1,1,1\n"
     path = _write(tmp_path, "two.csv", text)
     with pytest.raises(ValueError, match="two force columns") as error:
-        jc.read_test(path, length_mm=1)
+        jc.read_test(path, metadata={"length_mm": 1})
     assert "perhaps columns='time_s,force_N,force_kN'" in str(error.value)
 
 
 def test_caller_values_win_with_a_warning(tmp_path):
     path = _write(tmp_path, "bluehill.csv", _bluehill())
     with pytest.warns(jc.MetadataConflictWarning) as caught:
-        data = jc.read_test(path, length_mm=20, rate_mm_per_min=5.0)
+        data = jc.read_test(path, metadata={"length_mm": 20, "rate_mm_per_min": 5.0})
     assert data.metadata["length_mm"] == 20.0
     assert len(caught) == 1  # the rate agrees
     message = str(caught[0].message)
@@ -219,13 +223,16 @@ def test_caller_values_win_with_a_warning(tmp_path):
     path = _write(tmp_path, "inches.csv", _bluehill(length="0.5,in"))
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        assert jc.read_test(path, length_mm=12.7).metadata["length_mm"] == 12.7
-        jc.read_test(path, length_mm=12.7001, diameter_mm=0.5)
+        assert (
+            jc.read_test(path, metadata={"length_mm": 12.7}).metadata["length_mm"]
+            == 12.7
+        )
+        jc.read_test(path, metadata={"length_mm": 12.7001, "diameter_mm": 0.5})
     # The canonical `# key: value` block too.
     text = "# length_mm: 300\n# material: SK78\ntime_s,force_N\n0,0\n1,1\n"
     path = _write(tmp_path, "canonical.csv", text)
     with pytest.warns(jc.MetadataConflictWarning, match="line 2: material='SK99'"):
-        data = jc.read_test(path, material="SK99")
+        data = jc.read_test(path, metadata={"material": "SK99"})
     assert data.metadata["material"] == "SK99"
 
 
@@ -250,7 +257,7 @@ def test_of_two_columns_of_one_quantity_the_plainer_is_read(tmp_path):
     )
     for t, e, f in ROWS:
         text += f"{t + 100},{t},{e * 2},{e},{f}\n"
-    data = jc.read_test(_write(tmp_path, "two.csv", text), length_mm=10)
+    data = jc.read_test(_write(tmp_path, "two.csv", text), metadata={"length_mm": 10})
     _check_rows(data)
     assert data.notes == (
         "columns not read: 'Cycle Elapsed Time (s)', 'Tensile extension (mm)'",

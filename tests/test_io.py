@@ -196,12 +196,14 @@ def test_read_test_overrides_file_metadata(tmp_path):
     path = _write(tmp_path, HISTORY)
     data = jc.read_test(
         path,
-        length_mm=100,
-        diameter_mm=2,
-        rate_mm_per_min=6,
-        temperature_C=30,
-        material="Dyneema SK99",
-        id="other",
+        metadata={
+            "length_mm": 100,
+            "diameter_mm": 2,
+            "rate_mm_per_min": 6,
+            "temperature_C": 30,
+            "material": "Dyneema SK99",
+            "id": "other",
+        },
     )
     assert data.metadata == {
         "id": "other",
@@ -216,7 +218,7 @@ def test_read_test_overrides_file_metadata(tmp_path):
     np.testing.assert_allclose(float(cable.length), 0.1)
     np.testing.assert_allclose(float(cable.speed), 6e-3 / 60)
     with pytest.raises(ValueError, match=r"argument length_mm: must be positive"):
-        jc.read_test(path, length_mm=-1)
+        jc.read_test(path, metadata={"length_mm": -1})
 
 
 def test_testdata_mask_fields():

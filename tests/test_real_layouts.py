@@ -47,8 +47,16 @@ def _columns(path, *names, encoding="utf-8-sig"):
 
 def _wavematrix(name, length_mm):
     path = WAVEMATRIX / name
-    raw = jc.read_test(path, length_mm=length_mm, detect_slack=False, **RAW)
-    auto = jc.read_test(path, length_mm=length_mm, detect_slack=False, **AUTO)
+    raw = jc.read_test(
+        path,
+        metadata={"length_mm": length_mm},
+        options=jc.ReadOptions(detect_slack=False, **RAW),
+    )
+    auto = jc.read_test(
+        path,
+        metadata={"length_mm": length_mm},
+        options=jc.ReadOptions(detect_slack=False, **AUTO),
+    )
     return path, raw, auto
 
 
@@ -64,7 +72,9 @@ def test_wavematrix_tension_read_negative_is_flipped():
     assert any("is kept" in note and "zeroed" in note for note in auto.notes)
     assert not any("tared" in note for note in auto.notes)
     # As the command line reads it: the tension is fitted, not masked as slack.
-    masked = jc.read_test(path, length_mm=57, **AUTO)
+    masked = jc.read_test(
+        path, metadata={"length_mm": 57}, options=jc.ReadOptions(**AUTO)
+    )
     assert np.mean(masked.mask) > 0.9 and np.max(masked.force) > 40.0
 
 
@@ -83,20 +93,34 @@ def test_wavematrix_offset_at_rest_is_tared():
     (note,) = [n for n in auto.notes if "tared" in n]
     assert f"{-rest:+.4g} N" in note and "--no-tare" in note
     untared = jc.read_test(
-        path, length_mm=79, detect_slack=False, tare=False, force_sign="auto"
+        path,
+        metadata={"length_mm": 79},
+        options=jc.ReadOptions(detect_slack=False, tare=False, force_sign="auto"),
     )
     np.testing.assert_allclose(untared.force, -1e3 * force_kN, rtol=1e-12)
     # Without the corrections the command line masked every sample.
-    assert not np.any(jc.read_test(path, length_mm=79, **RAW).mask)
-    assert np.mean(jc.read_test(path, length_mm=79).mask) > 0.3
+    assert not np.any(
+        jc.read_test(
+            path, metadata={"length_mm": 79}, options=jc.ReadOptions(**RAW)
+        ).mask
+    )
+    assert np.mean(jc.read_test(path, metadata={"length_mm": 79}).mask) > 0.3
 
 
 def test_compression_test_is_read_as_written():
     """Force and elongation both going negative (a lattice crushed): no flip, no
     tare, no note about the load cell."""
     path = DATA / "exports" / "bluer" / "vero_clear_ccyclic_Specimen_RawData_6.csv"
-    raw = jc.read_test(path, length_mm=20, detect_slack=False, **RAW)
-    auto = jc.read_test(path, length_mm=20, detect_slack=False, **AUTO)
+    raw = jc.read_test(
+        path,
+        metadata={"length_mm": 20},
+        options=jc.ReadOptions(detect_slack=False, **RAW),
+    )
+    auto = jc.read_test(
+        path,
+        metadata={"length_mm": 20},
+        options=jc.ReadOptions(detect_slack=False, **AUTO),
+    )
     assert np.mean(raw.force < 0) > 0.9
     np.testing.assert_array_equal(auto.force, raw.force)
     assert auto.notes == raw.notes
@@ -126,8 +150,8 @@ def test_preload_is_never_tared(tmp_path, unload_to):
     to zero, or recovers at 5 N (at a larger elongation than at rest)."""
     t, f, e = _creep(10.0, unload_to)
     path = _history(tmp_path / "creep.csv", t, f, e)
-    data = jc.read_test(path, detect_slack=False, **AUTO)
-    written = jc.read_test(path, detect_slack=False)
+    data = jc.read_test(path, options=jc.ReadOptions(detect_slack=False, **AUTO))
+    written = jc.read_test(path, options=jc.ReadOptions(detect_slack=False))
     np.testing.assert_array_equal(data.force, written.force)
     (note,) = data.notes
     assert "is kept as a load the test starts with" in note
@@ -139,7 +163,7 @@ def test_offsets_are_tared(tmp_path):
     latex glove's pattern): both tared by their rest reading."""
     t, f, e = _creep(0.0, 0.0, offset=-5.0)
     path = _history(tmp_path / "negative.csv", t, f, e)
-    data = jc.read_test(path, detect_slack=False, **AUTO)
+    data = jc.read_test(path, options=jc.ReadOptions(detect_slack=False, **AUTO))
     np.testing.assert_allclose(data.force, f + 5.0, atol=0.05)
     assert "tared" in data.notes[0] and "cannot push" in data.notes[0]
     t = np.arange(0.0, 40.0, 0.25)
@@ -148,7 +172,7 @@ def test_offsets_are_tared(tmp_path):
     # The first loading from the rest reading, the later cycles 4 N lower.
     f = np.where(t < 7.5, 20.0 + 14.0 * e, 16.0 + 14.0 * e) + noise
     path = _history(tmp_path / "positive.csv", t, f, e)
-    data = jc.read_test(path, detect_slack=False, **AUTO)
+    data = jc.read_test(path, options=jc.ReadOptions(detect_slack=False, **AUTO))
     offset = np.median(f[t < 5])
     np.testing.assert_allclose(data.force, f - offset, atol=1e-12)
     assert "tared" in data.notes[0] and "rest elongation" in data.notes[0]
@@ -157,7 +181,7 @@ def test_offsets_are_tared(tmp_path):
 def test_zeroed_load_cell_is_left_alone(tmp_path):
     t, f, e = _creep(0.0, 0.0)
     path = _history(tmp_path / "zeroed.csv", t, f, e)
-    data = jc.read_test(path, detect_slack=False, **AUTO)
+    data = jc.read_test(path, options=jc.ReadOptions(detect_slack=False, **AUTO))
     np.testing.assert_array_equal(data.force, f)
     assert data.notes == ()
 
@@ -166,7 +190,7 @@ def test_fatigue_header_is_line_one():
     """Without columns, the error names line 1 (the header), not the first data row,
     which carries the specimen's name; its columns without units are listed."""
     with pytest.raises(ValueError) as error:
-        jc.read_test(LIU, length_mm=64)
+        jc.read_test(LIU, metadata={"length_mm": 64})
     message = str(error.value)
     assert f"{LIU}, line 1:" in message
     assert "'Machine_Load' (force, no unit)" in message
@@ -179,10 +203,8 @@ def test_fatigue_time_from_cycles():
     data = jc.read_test(
         LIU,
         columns=LIU_COLUMNS,
-        frequency_hz=4.2,
-        length_mm=64,
-        detect_slack=False,
-        **RAW,
+        metadata={"length_mm": 64},
+        options=jc.ReadOptions(frequency_hz=4.2, detect_slack=False, **RAW),
     )
     n, disp, load = _columns(
         LIU, "Machine_N_cycles", "Machine_Displacement", "Machine_Load"
@@ -202,10 +224,13 @@ def test_fatigue_time_from_cycles():
     assert "4.2 Hz" in note and "bursts" in note and "cyclic part" in note
     # The mean load is held (a creep record): never tared.
     assert jc.read_test(
-        LIU, columns=LIU_COLUMNS, frequency_hz=4.2, length_mm=64, **AUTO
+        LIU,
+        columns=LIU_COLUMNS,
+        metadata={"length_mm": 64},
+        options=jc.ReadOptions(frequency_hz=4.2, **AUTO),
     ).force == pytest.approx(data.force)
     with pytest.raises(ValueError, match="frequency"):
-        jc.read_test(LIU, columns=LIU_COLUMNS, length_mm=64)
+        jc.read_test(LIU, columns=LIU_COLUMNS, metadata={"length_mm": 64})
 
 
 def test_titin_stretch_ratio_and_stress():
@@ -214,9 +239,8 @@ def test_titin_stretch_ratio_and_stress():
     data = jc.read_test(
         path,
         columns="time_s,stretch_ratio,stress_kPa,-",
-        length_mm=2.0,
-        diameter_mm=diameter,
-        detect_slack=False,
+        metadata={"length_mm": 2.0, "diameter_mm": diameter},
+        options=jc.ReadOptions(detect_slack=False),
     )
     time, stretch, stress = _columns(path, "Time", "L", "F")
     area_mm2 = math.pi * diameter**2 / 4
@@ -304,7 +328,10 @@ def test_wide_encodings_read_like_utf8(tmp_path, encoding):
     twin, wide = tmp_path / "utf8.txt", tmp_path / "wide.txt"
     twin.write_bytes(RHEO_TEXT.encode("utf-8"))
     wide.write_bytes(RHEO_TEXT.encode(encoding))
-    options = dict(length_mm=1.0, diameter_mm=10.0, detect_slack=False)
+    options = dict(
+        metadata={"length_mm": 1.0, "diameter_mm": 10.0},
+        options=jc.ReadOptions(detect_slack=False),
+    )
     a, b = jc.read_test(twin, **options), jc.read_test(wide, **options)
     np.testing.assert_allclose(a.temperature, [20.0, 20.0, 20.01])
     for name in ("time", "elongation", "force", "temperature"):
@@ -317,7 +344,11 @@ def test_text_column_not_read_but_a_word_in_a_read_column_refused(tmp_path):
     in a column that is read is refused, naming the file, line and column."""
     path = tmp_path / "status.csv"
     path.write_text(RHEO_TEXT.replace(",", "."), encoding="utf-8")
-    data = jc.read_test(path, length_mm=1.0, diameter_mm=10.0, detect_slack=False)
+    data = jc.read_test(
+        path,
+        metadata={"length_mm": 1.0, "diameter_mm": 10.0},
+        options=jc.ReadOptions(detect_slack=False),
+    )
     np.testing.assert_allclose(data.time, [0.010, 0.021, 0.031])
     assert data.lines.tolist() == [6, 7, 8]
     (note,) = data.notes
@@ -326,6 +357,6 @@ def test_text_column_not_read_but_a_word_in_a_read_column_refused(tmp_path):
         RHEO_TEXT.replace(",", ".").replace("-1.2326", "n.a."), encoding="utf-8"
     )
     with pytest.raises(ValueError) as error:
-        jc.read_test(path, length_mm=1.0, diameter_mm=10.0)
+        jc.read_test(path, metadata={"length_mm": 1.0, "diameter_mm": 10.0})
     message = str(error.value)
     assert f"{path}, line 7, column 4 " in message and "'n.a.'" in message
