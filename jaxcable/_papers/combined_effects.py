@@ -43,9 +43,9 @@ from .synthetic import (
     HIDDEN_EFFECT_DESIGN,
     HIDDEN_EFFECTS,
     _design_cable,
+    design_tests,
     hidden_effect_model,
     hidden_effect_protocol,
-    synthesize,
 )
 
 
@@ -183,25 +183,8 @@ def hidden_pair_dataset(
     """
     pair = _pair(pair)
     model = hidden_pair_model(pair, seed=seed, sizes=sizes)
-    tests = []
-    for i, (length, rate, force, temp) in enumerate(HIDDEN_EFFECT_DESIGN):
-        tests.append(
-            synthesize(
-                model,
-                _design_cable(length, rate, temp),
-                hidden_effect_protocol(force),
-                seed=seed * 1000 + i,
-                elongation_noise=elongation_noise,
-                force_noise=force_noise,
-                temperature_C=temp,
-                temperature_swing_C=0.0,
-                metadata={
-                    "id": f"L{length:.0f}-v{rate:.0f}-F{force:.0f}-T{temp:.0f}",
-                    "hidden_effect": "+".join(pair),
-                },
-            )
-        )
-    return tests
+    noise = (elongation_noise, force_noise)
+    return design_tests(model, seed, "+".join(pair), noise)
 
 
 def pair_truth_elongations(

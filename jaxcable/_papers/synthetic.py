@@ -182,7 +182,9 @@ def bundled_dataset(seed: int = 20261121) -> list[TestData]:
 
     A list of eight [`jaxcable.TestData`][] with an `id` in their metadata.
     """
-    model = TerminationCompliance(IntegratedModel(), compliance=BUNDLED_COMPLIANCE)
+    # Model fields convert numbers (`field_array`), which pyright does not see through
+    # `fields.parameter`.
+    model = TerminationCompliance(IntegratedModel(), compliance=BUNDLED_COMPLIANCE)  # pyright: ignore[reportArgumentType]
     tests = []
     index = 0
     for length in _BUNDLED_LENGTHS_MM:
@@ -386,6 +388,19 @@ def hidden_effect_dataset(
     """
     outside = effect in OUT_OF_CATALOGUE
     model = hidden_effect_model(None if outside else effect, seed=seed, size=size)
+
+    def added(cable, i):
+        return _adder(effect, cable, seed=seed, index=i, size=size) if outside else None
+
+    noise = (elongation_noise, force_noise)
+    return design_tests(model, seed, effect or "none", noise, added)
+
+
+def design_tests(model, seed: int, label: str, noise, added=None) -> list[TestData]:
+    """The six tests of `HIDDEN_EFFECT_DESIGN` simulated by `model`, each with the
+    noise `noise = (elongation_noise m, force_noise N)` drawn from `seed` and the
+    test's index, and `label` as its `hidden_effect` metadata; `added(cable, i)`, when
+    given, is the elongation added to test `i` (an effect outside the catalogue)."""
     tests = []
     for i, (length, rate, force, temp) in enumerate(HIDDEN_EFFECT_DESIGN):
         cable = _design_cable(length, rate, temp)
@@ -395,19 +410,15 @@ def hidden_effect_dataset(
                 cable,
                 hidden_effect_protocol(force),
                 seed=seed * 1000 + i,
-                elongation_noise=elongation_noise,
-                force_noise=force_noise,
+                elongation_noise=noise[0],
+                force_noise=noise[1],
                 temperature_C=temp,
                 temperature_swing_C=0.0,
                 metadata={
                     "id": f"L{length:.0f}-v{rate:.0f}-F{force:.0f}-T{temp:.0f}",
-                    "hidden_effect": effect or "none",
+                    "hidden_effect": label,
                 },
-                added=(
-                    _adder(effect, cable, seed=seed, index=i, size=size)
-                    if outside
-                    else None
-                ),
+                added=None if added is None else added(cable, i),
             )
         )
     return tests
