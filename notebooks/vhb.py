@@ -58,9 +58,11 @@ def read(path: pathlib.Path, samples: int = 200) -> jc.TestData:
     data = jc.read_test(
         path,
         columns="time_s,elongation_mm,force_N",
-        length_mm=GAUGE_MM,
-        rate_mm_per_min=rate * GAUGE_MM * 60,
-        id=path.stem,
+        metadata={
+            "length_mm": GAUGE_MM,
+            "rate_mm_per_min": rate * GAUGE_MM * 60,
+            "id": path.stem,
+        },
     )
     data.metadata["breaking_load_N"] = BREAKING_LOAD
     data.metadata["breaking_strain"] = BREAKING_STRAIN
@@ -86,8 +88,7 @@ def read_relaxation(path: pathlib.Path, ramp: int = 40, hold: int = 80) -> jc.Te
     data = jc.read_test(
         path,
         columns="time_s,elongation_mm,force_N",
-        length_mm=GAUGE_MM,
-        id="relax_" + path.stem,
+        metadata={"length_mm": GAUGE_MM, "id": "relax_" + path.stem},
     )
     t, e = data.time, data.elongation
     top = int(np.flatnonzero(e >= 0.999 * e.max())[0])
