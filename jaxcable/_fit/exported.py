@@ -10,7 +10,7 @@ jaxcable's source, JAX and the platform), serialized under a hash of that
 configuration, and a later process deserializes it and calls it (its compilation
 then loads from the compilation cache).
 
-Only the command line uses it ([`cached_fit_kernels`][] around its call of
+Only the command line uses it (`cached_fit_kernels` around its call of
 `jaxcable.fit`); the library's `jaxcable.fit` compiles `fit_kernel` as always. A
 call that finds no program, or one it cannot read, exports and writes it, and runs
 the exported program too, so that a run with an empty cache and a run that loads the
@@ -45,7 +45,7 @@ _ADDRESS = re.compile(r" at 0x[0-9a-fA-F]+")
 
 def current_fit_kernel():
     """The fit kernel in effect: `fit_kernel`, or the cached one of
-    [`cached_fit_kernels`][]."""
+    `cached_fit_kernels`."""
     return _KERNEL.get()
 
 

@@ -5,7 +5,7 @@ A document is `{"model": class name, "parameters": {field: number or list},
 `"base": document` for the model a wrapper (an extension) wraps, and
 `FIELD: document` for any other module a model holds (e.g. the parameter surface of
 `jaxcable.LiveFiveElement`). Class names are those of the model registry (every
-class that declares a `CLI_NAME`) and of [`PARTS`][].
+class that declares a `CLI_NAME`) and of `PARTS`.
 """
 
 import dataclasses

@@ -44,14 +44,14 @@ def shared_layout(
     drive="auto",
     covariate: str | None = None,
 ) -> Layout:
-    """The layout of `names`, every one of them fittable, for [`fit_subset`][].
+    """The layout of `names`, every one of them fittable, for `fit_subset`.
 
     **Arguments:**
 
     - `model`: the model, with start values of every name that fix each one's
         transform (a log scale for a positive start, as [`jaxcable.fit`][] chooses):
         give each name the value a fit that frees it starts from.
-    - `tests`, `drive`, `covariate`: as in [`jaxcable.fit`][].
+    - `tests`, `drive`, `covariate`: the fields of a [`jaxcable.Problem`][].
     - `names`: the parameters any of the fits frees (shared ones only).
 
     **Returns:**
@@ -89,8 +89,9 @@ def fit_subset(
     - `model`: the model and its start values (the structure `layout` was made for;
         the parameters not in `free` keep their values, inf included).
     - `tests`, `max_steps`, `multistart`, `spread`, `key`, `throw`, `drive`,
-        `covariate`, `solver`: as in [`jaxcable.fit`][].
-    - `layout`: from [`shared_layout`][].
+        `covariate`, `solver`: the fields of a [`jaxcable.Problem`][] and a
+        [`jaxcable.LeastSquares`][], and `throw` as in [`jaxcable.fit`][].
+    - `layout`: from `shared_layout`.
     - `free`: the parameters to fit, a subset of `layout.names`.
     - `size`: the length of the solver's vector, >= len(free): the same for every
         call that is to share the kernel.
@@ -149,7 +150,7 @@ def _checked_subset(
 
     **Raises:**
 
-    `ValueError` naming the argument, as [`fit_subset`][] says.
+    `ValueError` naming the argument, as `fit_subset` says.
     """
     unknown = [n for n in free if n not in layout.names]
     if unknown or len(set(free)) != len(free):

@@ -261,7 +261,7 @@ def start_scaling(model: AbstractCableModel, tests, *, drive="auto") -> StartSca
 
     **Returns:**
 
-    A [`StartScaling`][].
+    A [`jaxcable.StartScaling`][].
     """
     if not isinstance(model, AbstractCableModel):
         raise ValueError(
@@ -330,8 +330,8 @@ def scaled_start(model: AbstractCableModel, tests, *, drive="auto"):
     - `model`: any model of the registry (extensions around a base included), with
         scalar parameters: its start values.
     - `tests`: a [`jaxcable.TestData`][] or a sequence of them, with elongation.
-    - `drive`: each test's drive, as in [`jaxcable.fit`][] (it chooses the channel
-        whose holds count).
+    - `drive`: each test's drive, as a [`jaxcable.Problem`][]'s `drive` (it chooses
+        the channel whose holds count).
 
     **Returns:**
 
@@ -356,7 +356,7 @@ def start_failure(model: AbstractCableModel, tests, *, drive="auto") -> str:
 
     **Arguments:**
 
-    - `model`, `tests`, `drive`: as in [`jaxcable.fit`][].
+    - `model`, `tests`, `drive`: the fields of a [`jaxcable.Problem`][].
 
     **Returns:**
 
