@@ -38,7 +38,7 @@ def default_cache_dir() -> pathlib.Path:
 
 def exported_programs_dir() -> pathlib.Path | None:
     """Where the command line keeps its exported fit programs (traced and lowered,
-    see `jaxcable._fit.exported`): `exported/` in [`default_cache_dir`][], cleared
+    see `jaxcable._fit.exported`): `exported/` in `default_cache_dir`, cleared
     with it; `None` when `$JAXCABLE_NO_CACHE` turns the cache off."""
     if cache_disabled():
         return None
@@ -61,14 +61,15 @@ def enable_compilation_cache(
 
     **Arguments:**
 
-    - `directory`: where to keep them (default [`default_cache_dir`][]: per user).
+    - `directory`: where to keep them (default `default_cache_dir`: per user).
 
     **Returns:**
 
     The directory in use, or `None` when `$JAXCABLE_NO_CACHE` turns the cache off
     and no `directory` is given.
     """
-    current = jax.config.jax_compilation_cache_dir
+    # jax's Config sets its options as attributes at run time.
+    current = jax.config.jax_compilation_cache_dir  # pyright: ignore[reportAttributeAccessIssue]
     if directory is None:
         if current:
             return pathlib.Path(current)

@@ -109,7 +109,7 @@ class Progress:
 
     def _time_left(self, now: float) -> str:
         # The first step is left out of the rate: it includes the compilation.
-        if self._first is None or self.done <= self._first[1]:
+        if self.total is None or self._first is None or self.done <= self._first[1]:
             return "?"
         first_time, first_done = self._first
         rate = (now - first_time) / (self.done - first_done)
@@ -148,7 +148,7 @@ class AbstractProgressMeter(eqx.Module):
     def bar(
         self, label: str, total: int | None = None, *, eta: bool = False, keep=False
     ) -> Progress:
-        """A [`Progress`][] bar (a context manager; `advance(steps, note)` counts
+        """A `Progress` bar (a context manager; `advance(steps, note)` counts
         steps) for work of `total` steps (None: unknown, a spinner), labelled
         `label`; with `eta`, the estimated time left; with `keep`, its last line
         left on the stream at the end."""

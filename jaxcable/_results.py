@@ -1,7 +1,9 @@
 import optimistix as optx
 
 
-class RESULTS(optx.RESULTS):
+# An equinox Enumeration extends another by subclassing; pyright takes it for an
+# Enum, whose subclasses are refused.
+class RESULTS(optx.RESULTS):  # pyright: ignore[reportGeneralTypeIssues]
     """Outcome of a simulation or a fit; each member's value is its error message.
 
     The members of optimistix's `RESULTS` are members here too (a fit reports its

@@ -9,7 +9,7 @@ are derived) and its command-line name, `CLI_NAME`, which also registers the cla
 """
 
 import abc
-from typing import Generic, TypeVar
+from typing import TYPE_CHECKING, ClassVar, Generic, TypeVar
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -206,7 +206,12 @@ class AbstractExtension(AbstractCableModel[_State]):
 
     base: AbstractCableModel
 
-    CLI_NAME: eqx.AbstractClassVar[str]
+    if TYPE_CHECKING:
+        # pyright does not take `eqx.AbstractClassVar` (typing's ClassVar re-exported
+        # under another name) for a ClassVar, and would make it a field of __init__.
+        CLI_NAME: ClassVar[str]
+    else:
+        CLI_NAME: eqx.AbstractClassVar[str]
     EXTENSION_ID = _ClassFact(lambda cls: cls.CLI_NAME.replace("-", "_"))
     EFFECT_FIELDS = _ClassFact(fields.fit_parameters)
     SIZE_FIELD = _ClassFact(_size_field)

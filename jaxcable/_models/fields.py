@@ -198,6 +198,15 @@ def parameter_info(cls: type, field: str) -> ParameterInfo | None:
     return ParameterInfo(facts.transform, facts.unit, facts.stiffness)
 
 
+def parameter_infos(cls: type) -> dict[str, ParameterInfo]:
+    """`{field: ParameterInfo}` of the fit parameters of `cls`, in field order."""
+    return {
+        n: ParameterInfo(f.transform, f.unit, f.stiffness)
+        for n, f in field_facts(cls).items()
+        if f.transform is not None
+    }
+
+
 def fitted_by_default(cls: type) -> tuple[str, ...] | None:
     """The declared parameters of `cls` that a fit varies by default, or None when
     that is every one of them."""

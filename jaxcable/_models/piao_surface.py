@@ -13,7 +13,7 @@ from .._arrays import field_array
 from .piao import PIAO_TABLE1, FiveElementModel
 
 
-def _coefficients(x):
+def _coefficients(x: ArrayLike) -> Array | np.ndarray:
     # A NumPy array stays on the host until the surface is evaluated: the preset
     # below is built when jaxcable is imported, and a JAX array there would start
     # JAX's backend, after which XLA_FLAGS are no longer read
@@ -46,7 +46,9 @@ class ParameterSurface(eqx.Module):
     - `first`: which variable is x, `"mass"` or `"length"` (static).
     """
 
-    coefficients: Float[Array, "*batch 9"] = eqx.field(converter=_coefficients)
+    coefficients: Float[Array | np.ndarray, "*batch 9"] = eqx.field(
+        converter=_coefficients
+    )
     first: str = eqx.field(static=True, default="mass")
 
     def __check_init__(self):
@@ -77,7 +79,8 @@ class ParameterSurface(eqx.Module):
         mass = jnp.asarray(mass_kg)
         length = jnp.asarray(length_m)
         x, y = (mass, length) if self.first == "mass" else (length, mass)
-        p = [self.coefficients[..., i] for i in range(9)]
+        coefficients = jnp.asarray(self.coefficients)  # a preset's are NumPy
+        p = [coefficients[..., i] for i in range(9)]
         # Grouped in powers of x (Horner in x) to limit cancellation.
         return (
             p[0]
@@ -164,4 +167,6 @@ def piao_five_element(
         _checks.require_positive("mass_kg", mass_kg, allow_zero=True)
         _checks.require_positive("length_m", length_m)
     E_1 = surface(mass_kg, length_m)
-    return FiveElementModel(E_L1=E_1, E_UL1=E_1, **PIAO_TABLE1)
+    # The fields convert numbers (`field_array`), which pyright does not see through
+    # `fields.parameter`.
+    return FiveElementModel(E_L1=E_1, E_UL1=E_1, **PIAO_TABLE1)  # pyright: ignore[reportArgumentType]

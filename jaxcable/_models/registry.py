@@ -20,17 +20,24 @@ from .base import (
 from .baselines import BoucWenModel, BurgersModel, HookeModel
 from .fields import (
     ParameterInfo as ParameterInfo,
-    fit_parameters,
     fitted_by_default,
     identifiable as identifiable,
     parameter_info as parameter_info,
+    parameter_infos,
 )
 from .findley import FindleyModel
 from .park import IntegratedModel
 from .piao import FiveElementModel
 
 
-PARK_IDENTIFIABLE: tuple[str, ...] = fitted_by_default(IntegratedModel)
+def _park_identifiable() -> tuple[str, ...]:
+    chosen = fitted_by_default(IntegratedModel)
+    # IntegratedModel declares parameters a fit keeps, so not every one is fitted.
+    assert chosen is not None
+    return chosen
+
+
+PARK_IDENTIFIABLE: tuple[str, ...] = _park_identifiable()
 """Park's parameters fitted by default (declared on
 [`jaxcable.IntegratedModel`][]'s fields: the ones cyclic tests identify)."""
 
@@ -54,8 +61,9 @@ class ModelEntry:
 
 
 def _entry(cls: type) -> ModelEntry:
-    parameters = {n: parameter_info(cls, n) for n in fit_parameters(cls)}
-    return ModelEntry(cls, cls.CLI_NAME, parameters, fitted_by_default(cls) or ())
+    return ModelEntry(
+        cls, cls.CLI_NAME, parameter_infos(cls), fitted_by_default(cls) or ()
+    )
 
 
 # The base models, in the order of `--model`'s choices.

@@ -139,7 +139,9 @@ def _model_from_log(logp) -> IntegratedModel:
         t_e=p["t_e"],
         lambda1=lambda1,
         lambda2=lambda2,
-        **_flow(p["E1c"]),
+        # Model fields convert numbers (`field_array`), which pyright does not see
+        # through `fields.parameter`.
+        **_flow(p["E1c"]),  # pyright: ignore[reportArgumentType]
         **SK78_HARDENING,
     )
 
@@ -319,7 +321,9 @@ def calibrate_sk78(
     A `Calibration` `(model, rows, costs, errors, steps)`.
     """
     if init is None:
-        init = IntegratedModel(**SK78_START)
+        # Model fields convert numbers (`field_array`), which pyright does not see
+        # through `fields.parameter`.
+        init = IntegratedModel(**SK78_START)  # pyright: ignore[reportArgumentType]
     if starts < 1:
         raise ValueError(f"`starts` must be >= 1, got {starts}.")
     lo, hi = _log_bounds()
@@ -349,6 +353,9 @@ def calibrate_sk78(
         steps.append(int(num_steps))
         if best is None or cost < best[0]:
             best = (cost, u)
+    assert best is not None  # starts >= 1
     fitted = _model_from_log(_bounded(best[1], args.lo, args.hi))
-    model = IntegratedModel(**{k: float(getattr(fitted, k)) for k in _FIELDS})
+    # Model fields convert numbers (`field_array`), which pyright does not see through
+    # `fields.parameter`.
+    model = IntegratedModel(**{k: float(getattr(fitted, k)) for k in _FIELDS})  # pyright: ignore[reportArgumentType]
     return Calibration(model, sk78_targets_report(model), costs, errors, steps)

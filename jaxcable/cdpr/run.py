@@ -139,6 +139,8 @@ def _simulate_robot(robot, scenario, real, controller, gain) -> RobotRun:
         if controller is None:
             ctrl, predicted = None, jnp.zeros(n, dtype)
         else:
+            # The carry holds a controller state whenever there is a controller.
+            assert carry.controller is not None
             ctrl, predicted = controller_step(
                 controller, robot.cables(lengths), carry.controller, t, forces
             )

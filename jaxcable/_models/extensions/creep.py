@@ -244,6 +244,7 @@ class Hereditary(AbstractExtension[HereditaryState]):
     ) -> tuple[HereditaryState, StrainParts]:
         base_state, parts = self.base.advance(state.base, cable, dt, force, direction)
         inner = innermost_integrated(self.base)
+        assert inner is not None  # check_more refuses a base without one
         area = cable.area
         impulse = state.impulse + 0.5 * (state.force + force) * dt
         # The base's clock (continuous in the force, no threshold switch).

@@ -3,7 +3,7 @@ r"""A strain found by sparse regression on the residual of a base model
 terms (the stress, its rate, time under load, rest time, cycles, a recorded
 covariate, its rate, and products), each computable from the model's own inputs.
 
-The library is one function ([`term_increments`][]) of a step's end values, used
+The library is one function (`term_increments`) of a step's end values, used
 both inside `advance` (scalars, traced) and host-side by the discovery on whole
 histories (arrays), so that the regression and the model integrate the same terms.
 """
@@ -173,7 +173,7 @@ class DiscoveredTerm(AbstractExtension[DiscoveredTermState]):
 
         d(eps_d)/dt = sum_k theta_k phi_k,   eps = eps_base + eps_d (creep part),
 
-    each phi_k one of [`TERMS`][] (at most four, static strings in `terms`):
+    each phi_k one of `TERMS` (at most four, static strings in `terms`):
 
     | term | phi | unit of phi | unit of theta |
     | --- | --- | --- | --- |
@@ -194,7 +194,7 @@ class DiscoveredTerm(AbstractExtension[DiscoveredTermState]):
     the load cycles, as the compliance of a braid abraded cycle after cycle.
     Where c is in the unit of the recorded covariate column (the fit sets
     `Cable.covariate` per sample from `jaxcable.fit(..., covariate=NAME)`). Over a
-    step the terms are integrated as [`term_increments`][] says (rates exactly,
+    step the terms are integrated as `term_increments` says (rates exactly,
     others by the trapezoid rule); time under load is the base's continuous tension
     clock (`jaxcable._models.kernels.tension_time_step`). Theta `k` belongs to
     `terms[k]`; the thetas beyond `len(terms)` are unused, stay 0 and are not
@@ -270,7 +270,14 @@ class DiscoveredTerm(AbstractExtension[DiscoveredTermState]):
         return DiscoveredTermState(
             self.base.init(cable),
             jnp.array(False),
-            *([zero] * 8),
+            zero,
+            zero,
+            zero,
+            zero,
+            zero,
+            zero,
+            zero,
+            zero,
             jnp.zeros(MAX_TERMS, zero.dtype),
         )
 
