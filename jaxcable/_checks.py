@@ -68,13 +68,15 @@ def require_positive(
     _require(name, v, bad, "non-negative" if allow_zero else "positive")
 
 
-def _is_int(value) -> bool:
+def is_int(value) -> bool:
+    """Whether `value` is an `int` or NumPy integer, not a `bool`."""
     return isinstance(value, int | np.integer) and not isinstance(
         value, bool | np.bool_
     )
 
 
-def _is_number(value) -> bool:
+def is_number(value) -> bool:
+    """Whether `value` is an `int`, `float` or NumPy number, not a `bool`."""
     return isinstance(value, int | float | np.integer | np.floating) and not isinstance(
         value, bool | np.bool_
     )
@@ -101,7 +103,7 @@ def require_int(
     `TypeError` naming `name` unless `value` is an integer; `ValueError` naming it
     when it is outside the bounds.
     """
-    if not _is_int(value):
+    if not is_int(value):
         raise TypeError(f"`{name}` must be an integer, got {value!r}.")
     if low is not None and value < low:
         raise ValueError(f"`{name}` must be >= {low}, got {value!r}.")
@@ -137,7 +139,7 @@ def require_number(
     `TypeError` naming `name` unless `value` is a number; `ValueError` naming it
     unless it is finite and within the bounds.
     """
-    if not _is_number(value):
+    if not is_number(value):
         raise TypeError(f"`{name}` must be a number, got {type(value).__name__}.")
     v = float(value)
     bounds = []

@@ -10,16 +10,10 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from .._checks import require_number
+from .._checks import is_number, require_number
 from .parsing import ColumnMap
 from .testdata import where
 from .units import IGNORE
-
-
-def _is_number(value) -> bool:
-    return isinstance(value, int | float | np.integer | np.floating) and not isinstance(
-        value, bool
-    )
 
 
 def check_path(path, argument: str = "path") -> None:
@@ -52,7 +46,7 @@ def check_threshold(value, argument: str, *, positive: bool = False) -> None:
     (> 0 with `positive`)."""
     if value is None:
         return
-    if not _is_number(value):
+    if not is_number(value):
         raise TypeError(
             f"`{argument}` must be a number or None, got {type(value).__name__}."
         )
@@ -96,7 +90,7 @@ def check_read_arguments(path, columns, metadata, keys: Sequence[str]) -> dict:
                     f"`{key}` must be a string or None, got {type(value).__name__}."
                 )
         # A string is parsed as the file's values are (`"14.33"`).
-        elif not (_is_number(value) or isinstance(value, str)):
+        elif not (is_number(value) or isinstance(value, str)):
             raise TypeError(
                 f"`{key}` must be a number or None, got {type(value).__name__}."
             )

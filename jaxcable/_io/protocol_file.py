@@ -54,6 +54,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from .._cable import DEFAULT_DIAMETER_MM, DEFAULT_RATE_MM_PER_MIN, Cable
+from .._checks import is_number
 from .._drive import Protocol
 from .json_file import read_json
 
@@ -122,10 +123,6 @@ class ProtocolFile(NamedTuple):
         return None if k < 0 else k
 
 
-def _is_json_number(value: Any) -> bool:
-    return isinstance(value, int | float) and not isinstance(value, bool)
-
-
 def _repeat(protocol: Protocol, times: int) -> Protocol:
     """`protocol` run `times` times in a row."""
     return Protocol(
@@ -166,7 +163,7 @@ class _Reader:
                 raise ValueError(f"{where}: missing key '{key}' ({unit}).")
             return float(default)
         value = self.obj[key]
-        if not _is_json_number(value) or not math.isfinite(value):
+        if not is_number(value) or not math.isfinite(value):
             raise self.error(key, f"{_show(value)} is not a finite number ({unit}).")
         if not (value > 0 or (allow_zero and value == 0)):
             bound = ">= 0" if allow_zero else "> 0"
@@ -199,7 +196,7 @@ class _Reader:
         if key not in self.obj:
             return default
         value = self.obj[key]
-        if not (_is_json_number(value) and float(value).is_integer() and value >= 1):
+        if not (is_number(value) and float(value).is_integer() and value >= 1):
             raise self.error(key, f"{_show(value)} is not an integer >= 1.")
         if value > MAX_SAMPLES:
             raise self.error(key, f"{value:g} is more than {MAX_SAMPLES:,}.")

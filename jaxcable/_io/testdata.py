@@ -13,6 +13,7 @@ from .._cable import (
     default_breaking_load,
     speed_from_mm_per_min,
 )
+from .._checks import require_number
 from .slack import SlackReport, detect_slack
 from .units import COLUMNS, QUANTITIES, written_name
 
@@ -263,17 +264,8 @@ def mask_slack(
         raise TypeError(
             f"`data` must be a jaxcable.TestData, got {type(data).__name__}."
         )
-    if threshold_N is not None and (
-        isinstance(threshold_N, bool)
-        or not isinstance(threshold_N, int | float | np.integer | np.floating)
-    ):
-        raise TypeError(
-            f"`threshold_N` must be a number or None, got {type(threshold_N).__name__}."
-        )
-    if threshold_N is not None and not (
-        math.isfinite(float(threshold_N)) and threshold_N >= 0
-    ):
-        raise ValueError(f"`threshold_N` must be finite and >= 0, got {threshold_N!r}.")
+    if threshold_N is not None:
+        require_number("threshold_N", threshold_N, 0)
     measured = data.force if data.force_raw is None else data.force_raw
     rate = data.metadata.get("rate_mm_per_min")
     speed = None if rate is None else speed_from_mm_per_min(float(rate))
