@@ -32,7 +32,7 @@ LAYERS = [
     {"_fit", "_problem"},
     {"_diagnose", "_montecarlo", "_papers", "_uncertainty"},
     {"_report"},
-    {"_cli", "cdpr", "cli", "papers", "states", "__init__", "__main__"},
+    {"_cli", "cdpr", "cli", "papers", "states", "internal", "__init__", "__main__"},
 ]
 LAYER = {name: i for i, names in enumerate(LAYERS) for name in names}
 
