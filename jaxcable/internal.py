@@ -73,11 +73,16 @@ from ._fit import (
     fit_subset as fit_subset,
     serialize as fit_serialize,
     shared_layout as shared_layout,
+    solver as fit_solver,
     with_jacobian_jvp as with_jacobian_jvp,
 )
 
-# Readers: the control of a test.
-from ._io import control as io_control, resolve_control as resolve_control
+# Readers: the control of a test; the CSV writer's module.
+from ._io import (
+    control_name as control_name,
+    csv as io_csv,
+    resolve_control as resolve_control,
+)
 
 # The models: registry, kernels, parameter facts.
 from ._models import (
@@ -111,3 +116,11 @@ from ._report import (
 
 # Posterior diagnostics.
 from ._uncertainty import bulk_ess as bulk_ess, split_rhat as split_rhat
+
+
+# Single kernels and helpers read from their modules.
+kelvin_voigt_step = model_kernels.kelvin_voigt_step
+fit_parameters = model_fields.fit_parameters
+model_document = fit_serialize.model_document
+model_from_document = fit_serialize.model_from_document
+second_test_indices = park.second_test_indices

@@ -1,6 +1,7 @@
 from .control import (
     CONTROLS as CONTROLS,
     ControlDetection as ControlDetection,
+    control_name as control_name,
     detect_control as detect_control,
     resolve_control as resolve_control,
 )
