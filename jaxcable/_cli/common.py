@@ -4,7 +4,11 @@ switch and the output folders."""
 import pathlib
 import sys
 
+import jax
+
+from .._problem import LeastSquares
 from .._progress import TextProgressMeter
+from .._uncertainty import NUTS
 
 
 PROG = "jaxcable"
@@ -30,11 +34,38 @@ def one_line(message) -> str:
     return " ".join(str(message).split())
 
 
-def progress_meter(args, log=None) -> TextProgressMeter:
-    """The progress meter of a command run with `args`: bars on stderr when it is a
-    terminal and `--quiet` is not given, and news on `log` (None: no news)."""
+def progress_meter(quiet: bool, log=None) -> TextProgressMeter:
+    """The progress meter of a command: bars on stderr when it is a terminal and
+    `--quiet` (`quiet`) is not given, and news on `log` (None: no news)."""
     # Carriage-return bars only on a terminal: logs and pipes get none.
-    return TextProgressMeter(show_bar=not args.quiet and sys.stderr.isatty(), log=log)
+    return TextProgressMeter(show_bar=not quiet and sys.stderr.isatty(), log=log)
+
+
+def add_choice(group, flag: str, choices: tuple[str, ...], help: str) -> None:
+    """Add the option `flag` to the argparse `group`: one of `choices`, the first
+    by default."""
+    group.add_argument(flag, choices=choices, default=choices[0], help=help)
+
+
+def least_squares(args) -> LeastSquares:
+    """The least-squares method the solver flags of the parsed command line `args`
+    give: `--starts`, `--max-steps`, and `--seed` for the start perturbations."""
+    return LeastSquares(
+        max_steps=args.max_steps, multistart=args.starts, key=jax.random.key(args.seed)
+    )
+
+
+def nuts(args) -> NUTS:
+    """The sampler the posterior flags of the parsed command line `args` give:
+    `--posterior` draws per chain, `--chains` chains, as many warm-up steps (at
+    least 200), and the key of `--seed`."""
+    n = args.posterior
+    return NUTS(
+        num_samples=n,
+        num_chains=args.chains,
+        num_warmup=max(n, 200),
+        key=jax.random.key(args.seed),
+    )
 
 
 def require_folder_of(path: str, option: str) -> None:

@@ -7,19 +7,22 @@ import dataclasses
 import pathlib
 import sys
 import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 
+from .._fit import resolve_drives
 from .._io import (
     MetadataConflictWarning,
+    ReadOptions,
     TestData,
     mask_slack,
     pushing_samples,
     read_test,
 )
 from .._progress import AbstractProgressMeter
-from .common import PROG, CliError, one_line
+from .common import PROG, CliError, add_choice, one_line
+from .limits import limits_note
 from .numbers import (
     breaking_strain as _breaking_strain,
     non_negative_int as _non_negative_int,
@@ -32,8 +35,8 @@ from .numbers import (
 _FIELD_LIMIT = csv.field_size_limit()
 
 
-def read_located(read: Callable[..., TestData], path, **options) -> TestData:
-    """`read(path, **options)`, with the errors the readers do not locate (the csv
+def read_located(read: Callable[..., TestData], path, *args, **kwargs) -> TestData:
+    """`read(path, *args, **kwargs)`, with the errors the readers do not locate (the csv
     module's, a number too large for a float) reported naming `path`; the readers'
     own `ValueError`s already name the file, line and column. A given option that
     replaces a file's value ([`jaxcable.MetadataConflictWarning`][]) is printed as
@@ -41,7 +44,7 @@ def read_located(read: Callable[..., TestData], path, **options) -> TestData:
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", MetadataConflictWarning)
-            data = read(path, **options)
+            data = read(path, *args, **kwargs)
     except csv.Error as e:
         message = str(e)
         if "field larger than field limit" in message:
@@ -68,6 +71,23 @@ def add_data_options(parser) -> None:
     raw = parser.add_argument_group(
         "reading data files (every command reads them alike)"
     )
+    _add_layout_options(raw)
+    _add_cable_options(raw)
+    parser.add_argument_group("the material's limits").add_argument(
+        "--breaking-strain",
+        type=_breaking_strain,
+        metavar="X",
+        help="breaking strain (elongation / length at break; 'inf' for a material "
+        "that does not break): a simulation beyond it fails (replaces the files' "
+        "'# breaking_strain:'). Default: the files' value; with only a "
+        "'# breaking_load_N:', none before a fit and, after one, the fitted model's "
+        "strain at that load in a ramp at the crosshead speed; else none",
+    )
+
+
+def _add_layout_options(raw) -> None:
+    """How a file is laid out and what its load cell reads: `--columns`,
+    `--frequency-hz`, `--force-sign`, `--no-tare`, `--skip-rows`."""
     raw.add_argument(
         "--columns",
         metavar="NAMES",
@@ -88,11 +108,11 @@ def add_data_options(parser) -> None:
         help="the test frequency, Hz, of files whose time is a cycle count "
         "('cycles' in --columns)",
     )
-    raw.add_argument(
+    add_choice(
+        raw,
         "--force-sign",
-        choices=("auto", "+1", "-1"),
-        default="auto",
-        help="the sign of the files' force: +1 as written, -1 flipped, auto "
+        ("auto", "+1", "-1"),
+        "the sign of the files' force: +1 as written, -1 flipped, auto "
         "(default) flipped where the load cell reads tension as negative (the force "
         "mostly negative and growing in magnitude as the elongation grows; a "
         "compression test, force and elongation both negative, is read as written)",
@@ -111,6 +131,11 @@ def add_data_options(parser) -> None:
         metavar="N",
         help="lines before the first data row (default: detected)",
     )
+
+
+def _add_cable_options(raw) -> None:
+    """The cable's facts that replace the files' (`--length-mm`, `--diameter-mm`,
+    `--rate-mm-per-min`) and `--no-slack`."""
     raw.add_argument(
         "--length-mm",
         type=_positive_float,
@@ -141,37 +166,67 @@ def add_data_options(parser) -> None:
         "a reading below it is refused, naming file, line and column, where the "
         "force drives the model (and masked where the elongation does)",
     )
-    limits = parser.add_argument_group("the material's limits")
-    limits.add_argument(
-        "--breaking-strain",
-        type=_breaking_strain,
-        metavar="X",
-        help="breaking strain (elongation / length at break; 'inf' for a material "
-        "that does not break): a simulation beyond it fails (replaces the files' "
-        "'# breaking_strain:'). Default: the files' value; with only a "
-        "'# breaking_load_N:', none before a fit and, after one, the fitted model's "
-        "strain at that load in a ramp at the crosshead speed; else none",
-    )
 
 
-def data_options(args) -> dict:
-    """`read_test` keyword arguments from the data options of the command line
-    (`detect_slack`: whether slack stretches are looked for, see [`read_data`][])."""
-    return dict(
+@dataclasses.dataclass(frozen=True)
+class Reading:
+    """How a command reads its data files: the arguments of `read_test` after the
+    path, from the data options of the command line.
+
+    **Fields:**
+
+    - `columns`: `--columns`, or None (from the header).
+    - `metadata`: the facts the options give or replace (`length_mm`,
+        `diameter_mm`, `rate_mm_per_min`, `breaking_strain`; None: not given).
+    - `options`: the reader's options; `detect_slack` says whether slack
+        stretches are looked for (see [`read_data`][]).
+    """
+
+    columns: str | None = None
+    metadata: Mapping[str, float | None] = dataclasses.field(default_factory=dict)
+    options: ReadOptions = ReadOptions()
+
+
+def data_options(args) -> Reading:
+    """How to read the data files, from the data options of the parsed command line
+    `args` (the flags of [`add_data_options`][])."""
+    return Reading(
         columns=args.columns,
-        skip_rows=args.skip_rows,
-        length_mm=args.length_mm,
-        diameter_mm=args.diameter_mm,
-        rate_mm_per_min=args.rate_mm_per_min,
-        breaking_strain=args.breaking_strain,
-        detect_slack=not args.no_slack,
-        force_sign=args.force_sign,
-        tare=not args.no_tare,
-        frequency_hz=args.frequency_hz,
+        metadata={
+            "length_mm": args.length_mm,
+            "diameter_mm": args.diameter_mm,
+            "rate_mm_per_min": args.rate_mm_per_min,
+            "breaking_strain": args.breaking_strain,
+        },
+        options=ReadOptions(
+            skip_rows=args.skip_rows,
+            detect_slack=not args.no_slack,
+            force_sign=args.force_sign,
+            tare=not args.no_tare,
+            frequency_hz=args.frequency_hz,
+        ),
     )
 
 
-def read_data(path, options: dict, *, require_force: bool = True) -> TestData:
+@dataclasses.dataclass(frozen=True)
+class DataFiles:
+    """The measured tests a command was asked to read, and how.
+
+    **Fields:**
+
+    - `paths`: the data files, as given.
+    - `reading`: how to read them ([`data_options`][]).
+    - `every`: keep every `every`-th sample (`--every`; the first and last kept).
+    - `drive`: `--drive`: `"auto"`, `"force"` or `"elongation"`.
+    """
+
+    paths: tuple[str, ...]
+    reading: Reading = Reading()
+    every: int = 1
+    drive: str = "auto"
+
+
+def read_data(path, reading: Reading, *, require_force: bool = True) -> TestData:
     """One data file as every command reads it: `read_test` with the data options,
     then its force cleaned by `mask_slack` whatever `--no-slack` says (which only
     stops the search for slack stretches): a reading within the load cell's noise
@@ -183,13 +238,14 @@ def read_data(path, options: dict, *, require_force: bool = True) -> TestData:
     options say otherwise; each said in the test's notes). A file without a force
     column (with `require_force=False`, an elongation history) is read as
     written."""
-    options = dict(options)
-    stretches = options.pop("detect_slack", True)
+    options = dataclasses.replace(
+        reading.options, detect_slack=False, require_force=require_force
+    )
     data = read_located(
-        read_test, path, detect_slack=False, require_force=require_force, **options
+        read_test, path, reading.columns, metadata=reading.metadata, options=options
     )
     if np.all(np.isfinite(data.force)):
-        data = mask_slack(data, stretches=stretches)
+        data = mask_slack(data, stretches=reading.options.detect_slack)
     return data
 
 
@@ -241,7 +297,7 @@ def _thin(data: TestData, every: int) -> TestData:
 
 
 def read_measured(
-    paths: Sequence, options: dict, every: int, meter: AbstractProgressMeter
+    paths: Sequence, reading: Reading, every: int, meter: AbstractProgressMeter
 ) -> list[tuple[TestData, str | None]]:
     """Measured tests, read by [`read_data`][] (canonical or raw exports), each
     with its [`pushing_error`][] found before thinning (the caller refuses it
@@ -250,7 +306,7 @@ def read_measured(
     **Arguments:**
 
     - `paths`: the files.
-    - `options`: `read_test` keyword arguments ([`data_options`][]).
+    - `reading`: how to read them ([`data_options`][]).
     - `every`: keep every `every`-th sample (the first and last kept).
     - `meter`: the progress meter.
 
@@ -262,7 +318,7 @@ def read_measured(
     tests = []
     with meter.bar("reading", len(paths)) as bar:
         for path in paths:
-            data = read_data(path, options)
+            data = read_data(path, reading)
             if data.elongation is None:
                 raise CliError(
                     f"{path}: no elongation column; a fit needs the measured "
@@ -275,10 +331,10 @@ def read_measured(
 
 
 def read_tests(
-    paths: Sequence, options: dict, every: int, meter: AbstractProgressMeter
+    paths: Sequence, reading: Reading, every: int, meter: AbstractProgressMeter
 ) -> list[TestData]:
     """The tests of [`read_measured`][], without their force checks."""
-    return [test for test, _ in read_measured(paths, options, every, meter)]
+    return [test for test, _ in read_measured(paths, reading, every, meter)]
 
 
 def describe_tests(
@@ -311,3 +367,40 @@ def describe_tests(
         # How an instrument export was read: the columns it has that are not read.
         lines.extend(f"    {note}" for note in getattr(t, "notes", ()))
     return lines
+
+
+def input_files(data: DataFiles, params: str | None) -> list[tuple[str, str]]:
+    """(what, path) of the files a fit or diagnosis reads: its data and `--params`
+    (`params`, when given)."""
+    inputs = [("DATA.csv", str(path)) for path in data.paths]
+    if params:
+        inputs.append(("--params", params))
+    return inputs
+
+
+def test_drives(tests, drive: str):
+    """Each test's drive with its reason (`--drive`, the file's `control` line, or
+    detected from the data)."""
+    try:
+        return resolve_drives(tests, drive)
+    except ValueError as e:
+        raise CliError(f"--drive: {e}") from None
+
+
+def read_described(data: DataFiles, meter: AbstractProgressMeter, log=None):
+    """(tests, drives with their reasons) of the data files, read as every command
+    reads them, after printing one line per file (and what limits the material) on
+    `log` (default stdout); fails naming file, line and column where a
+    force-driven test's force is negative beyond its noise."""
+    measured = read_measured(data.paths, data.reading, data.every, meter)
+    tests = [test for test, _ in measured]
+    drives = test_drives(tests, data.drive)
+    for (_, error), drive in zip(measured, drives):
+        if error is not None and drive.control == "force":
+            raise CliError(error)
+    print(f"read {len(tests)} file(s):", file=log)
+    print("\n".join(describe_tests(tests, data.every, drives)), file=log)
+    note = limits_note(tests)
+    if note:
+        print(note, file=log)
+    return tests, drives

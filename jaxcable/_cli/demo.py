@@ -6,19 +6,21 @@ cases overlaid) are its own: the report's plots show measured tests against a fi
 """
 
 import contextlib
+import dataclasses
 import importlib.resources
 import os
 import pathlib
 import sys
 from typing import NamedTuple
 
-import jax
 import numpy as np
 
 from .._cable import Cable
+from .._diagnose import CandidateSearch
 from .._drive import Protocol, simulate_rate_test
 from .._io import TestData, write_csv
 from .._models import PARK_IDENTIFIABLE, IntegratedModel
+from .._problem import LeastSquares, Problem
 from .._report import (
     DIAGNOSIS_REPORT_FILES,
     FIT_REPORT_FILES,
@@ -27,8 +29,8 @@ from .._report import (
     write_report,
 )
 from .._results import RESULTS
-from .common import CliError, make_folder, one_line, progress_meter
-from .data import read_tests
+from .common import CliError, least_squares, make_folder, one_line, progress_meter
+from .data import Reading, read_tests
 from .diagnose import run_diagnosis
 from .fit import fit_failure, run_fit
 from .models import names_option, parameter_names
@@ -72,6 +74,32 @@ class _Simulated(NamedTuple):
     elongation: np.ndarray  # mm
     residual: float  # mm, at the end of the first unloading
     error: str  # "" when successful
+
+
+@dataclasses.dataclass(frozen=True)
+class DemoRequest:
+    """What `jaxcable demo` was asked, as the values its flags give.
+
+    **Fields:**
+
+    - `out`: the output folder.
+    - `samples_per_ramp`: of the simulated tests.
+    - `data`: the folder of CSV files to fit, or None for the bundled data set.
+    - `fit`: `--fit` as given (None: Park's identifiable parameters).
+    - `method`: the least-squares method of the fit (the diagnosis's: one start).
+    - `every`: fit every `every`-th sample.
+    - `diagnose`: whether step 3, the diagnosis, runs.
+    - `quiet`: `--quiet`.
+    """
+
+    out: str
+    samples_per_ramp: int
+    data: str | None
+    fit: str | None
+    method: LeastSquares
+    every: int = 1
+    diagnose: bool = True
+    quiet: bool = False
 
 
 def _simulate_case(
@@ -143,15 +171,16 @@ def _bundled_files() -> list:
     )
 
 
-def _data(args) -> tuple[list, str]:
-    """(files, description) of the data set the demo fits; fails when it is empty."""
-    if args.data is not None:
-        folder = pathlib.Path(args.data)
+def _data(data: str | None) -> tuple[list, str]:
+    """(files, description) of the data set the demo fits: the folder `data`
+    (`--data`), else the bundled one; fails when it is empty."""
+    if data is not None:
+        folder = pathlib.Path(data)
         if not folder.is_dir():
-            raise CliError(f"--data {args.data}: not a folder.")
+            raise CliError(f"--data {data}: not a folder.")
         files = sorted(folder.glob("*.csv"))
         if not files:
-            raise CliError(f"--data {args.data}: no *.csv files in this folder.")
+            raise CliError(f"--data {data}: no *.csv files in this folder.")
         return files, str(folder)
     files = _bundled_files()
     if not files:
@@ -164,10 +193,10 @@ def _data(args) -> tuple[list, str]:
     return files, "the bundled data set (jaxcable/data/, synthetic)"
 
 
-def _simulate(args, out: pathlib.Path) -> tuple[list, list[pathlib.Path]]:
-    """Step 1: Park's tests simulated, written as CSV files and two plots."""
+def _simulate(spr: int, out: pathlib.Path) -> tuple[list, list[pathlib.Path]]:
+    """Step 1: Park's tests simulated with `spr` samples per ramp, written as CSV
+    files and two plots."""
     model = IntegratedModel()
-    spr = args.samples_per_ramp
     samples = 1 + 2 * spr * max(c.cycles for c in _CASES)
     results = [_simulate_case(model, c, spr, samples) for c in _CASES]
 
@@ -202,7 +231,7 @@ def _simulate(args, out: pathlib.Path) -> tuple[list, list[pathlib.Path]]:
     print(
         "1. Park et al.'s tests simulated with jaxcable.IntegratedModel() (Dyneema "
         f"SK78, {_DIAMETER_MM:g} mm, {_LENGTH_MM:g} mm long, "
-        f"{args.samples_per_ramp} samples per ramp):"
+        f"{spr} samples per ramp):"
     )
     print(f"  {'case':<20} {'peak [mm]':>10} {'residual after 1st unloading [mm]':>34}")
     for r in results:
@@ -214,14 +243,14 @@ def _simulate(args, out: pathlib.Path) -> tuple[list, list[pathlib.Path]]:
     return results, written
 
 
-def _print_fit(args, result, num_tests: int, source: str, notes: list[str]) -> None:
+def _print_fit(request, result, num_tests: int, source: str, notes: list[str]) -> None:
     """The headline numbers of step 2: RMSE per test, parameters, warnings."""
     n = int(np.sum(result.num_samples))
     print()
     print(
         f"2. jaxcable.IntegratedModel fitted to {source}: {num_tests} tests, {n} "
-        f"samples, multi-start x{args.starts}"
-        + (f", 1 sample in {args.every}" if args.every > 1 else "")
+        f"samples, multi-start x{request.method.multistart}"
+        + (f", 1 sample in {request.every}" if request.every > 1 else "")
         + "."
     )
     for note in notes[1:]:
@@ -254,14 +283,14 @@ def _print_fit(args, result, num_tests: int, source: str, notes: list[str]) -> N
         )
 
 
-def _fit(args, out: pathlib.Path, files: list, source: str, meter):
+def _fit(request: DemoRequest, files: list, source: str, meter):
     """Step 2: the integrated model fitted to the data set, with its report."""
     model = IntegratedModel()
     # By default the identifiable Park parameters; the others keep their defaults:
     # with all fourteen free the fit does not converge within the demo's time.
     names = (
-        names_option(args.fit, "--fit", model, "integrated")
-        if args.fit
+        names_option(request.fit, "--fit", model, "integrated")
+        if request.fit
         else list(PARK_IDENTIFIABLE)
     )
     with contextlib.ExitStack() as stack:
@@ -272,16 +301,9 @@ def _fit(args, out: pathlib.Path, files: list, source: str, meter):
             else f
             for f in files
         ]
-        tests = read_tests(paths, {}, args.every, meter)
-    result = run_fit(
-        model,
-        "integrated",
-        tests,
-        fit_names=names,
-        per_test=[],
-        args=args,
-        meter=meter,
-    )
+        tests = read_tests(paths, Reading(), request.every, meter)
+    problem = Problem(model, tests, fit=names or None)
+    result = run_fit(problem, "integrated", request.method, meter)
     failure = fit_failure(result)
     if failure is not None and not np.isfinite(result.loss):
         raise failure
@@ -294,8 +316,9 @@ def _fit(args, out: pathlib.Path, files: list, source: str, meter):
             f"{', '.join(fixed)} kept at the defaults of IntegratedModel() "
             "(with all fourteen free the fit does not converge within the demo's time)"
         )
-    if args.every > 1:
-        notes.append(f"1 sample in {args.every} fitted (--every)")
+    if request.every > 1:
+        notes.append(f"1 sample in {request.every} fitted (--every)")
+    out = pathlib.Path(request.out)
     params = out / "params.json"  # one of `_outputs`
     result.to_json(params)
     written = write_report(
@@ -306,34 +329,29 @@ def _fit(args, out: pathlib.Path, files: list, source: str, meter):
         notes=notes,
         progress_meter=meter,
     )
-    _print_fit(args, result, len(tests), source, notes)
+    _print_fit(request, result, len(tests), source, notes)
     return failure, [params, *written], tests
 
 
-def _diagnose(args, out: pathlib.Path, tests, meter):
+def _diagnose(request: DemoRequest, tests, meter):
     """Step 3: `jaxcable diagnose` on the same tests, report in `out/diagnosis/`."""
     print()
     print(
         "3. What the fit gets wrong: jaxcable diagnose (every candidate extension "
         "fitted, scored on the last 30 % of every test, held out)."
     )
-    diagnosis = run_diagnosis(
+    problem = Problem(
         IntegratedModel(),
-        "integrated",
         tests,
-        meter=meter,
-        fit_names=args.fit.split(",") if args.fit else None,
-        candidates=None,
-        split="time",
-        holdout=0.3,
-        folds=None,
-        multistart=1,
-        max_steps=args.max_steps,
-        key=jax.random.key(args.seed),
+        fit=tuple(request.fit.split(",")) if request.fit else None,
     )
+    search = CandidateSearch(
+        least_squares=dataclasses.replace(request.method, multistart=1)
+    )
+    diagnosis = run_diagnosis(problem, "integrated", search, meter)
     print()
     print(diagnosis.summary())
-    folder = out / "diagnosis"
+    folder = pathlib.Path(request.out) / "diagnosis"
     written = write_diagnosis_report(folder, diagnosis, tests)
     print(f"  wrote the diagnosis report to {folder}{os.sep}")
     return written
@@ -351,12 +369,27 @@ def _outputs(out: pathlib.Path, diagnose: bool) -> list[pathlib.Path]:
 
 def demo_command(args) -> int:
     """Run `jaxcable demo` with the parsed command line `args`; the exit status."""
+    request = DemoRequest(
+        out=args.out,
+        samples_per_ramp=args.samples_per_ramp,
+        data=args.data,
+        fit=args.fit,
+        method=least_squares(args),
+        every=args.every,
+        diagnose=not args.no_diagnose,
+        quiet=args.quiet,
+    )
+    return run_demo(request)
+
+
+def run_demo(request: DemoRequest) -> int:
+    """`jaxcable demo` as `request` asks; the exit status."""
     # Bars on a terminal; the diagnosis's news on stdout with the rest of the demo.
-    meter = progress_meter(args, sys.stdout)
+    meter = progress_meter(request.quiet, sys.stdout)
     # Checked first: no data, no demo (and no half-written output folder).
-    files, source = _data(args)
-    out = pathlib.Path(args.out)
-    outputs = _outputs(out, diagnose=not args.no_diagnose)
+    files, source = _data(request.data)
+    out = pathlib.Path(request.out)
+    outputs = _outputs(out, diagnose=request.diagnose)
     refuse_inputs(
         [("--out", path) for path in outputs],
         [("--data", f) for f in files if isinstance(f, pathlib.Path)],
@@ -364,11 +397,11 @@ def demo_command(args) -> int:
     make_folder(out, "--out")
     say_replacing(outputs, "--out")
     with write_errors("--out", out):
-        results, written = _simulate(args, out)
-        failure, fit_written, tests = _fit(args, out, files, source, meter)
+        results, written = _simulate(request.samples_per_ramp, out)
+        failure, fit_written, tests = _fit(request, files, source, meter)
         written += fit_written
-        if not args.no_diagnose:
-            written += _diagnose(args, out, tests, meter)
+        if request.diagnose:
+            written += _diagnose(request, tests, meter)
     print()
     print(f"Wrote {len(written)} files to {out}{os.sep}: ", end="")
     print(", ".join(p.name for p in written))

@@ -3,19 +3,32 @@ measured tests, written as a protocol file that `jaxcable simulate` and a tester
 run."""
 
 import argparse
+import dataclasses
 import math
 
-import jax
 import numpy as np
 
+from .._diagnose import CandidateSearch, Diagnosis
 from .._models import EXTENSIONS
-from .._uncertainty import TestBudget, design_test
-from .common import CliError, progress_meter, require_folder_of
+from .._problem import LeastSquares, Problem
+from .._uncertainty import (
+    NUTS,
+    TestBudget,
+    TestDesign,
+    design_discriminating_test,
+    design_test,
+)
+from .common import CliError, least_squares, nuts, progress_meter, require_folder_of
+from .data import DataFiles, data_options, read_described
 from .diagnose import run_diagnosis
-from .fit import fit_failure, read_described, run_fit, run_posterior
+from .fit import (
+    fit_failure,
+    run_fit,
+    run_posterior,
+)
 from .limits import strain_at_load, with_strain_from_load
-from .models import data_start, names_option, resolve_model
-from .numbers import number, positive_float, positive_int
+from .models import ModelChoice, data_start, names_option, resolve_model
+from .numbers import at_least, number, positive_float, positive_int, seed
 from .outputs import refuse_inputs, say_replacing, write_errors
 
 
@@ -70,13 +83,13 @@ def add_design_command(commands, add_model_options, add_data_options, add_drive)
     what = parser.add_argument_group("what is known")
     what.add_argument("--fit", metavar="NAMES", help="parameters to fit")
     what.add_argument("--starts", type=_int, default=4, metavar="N")
-    what.add_argument("--seed", type=int, default=0, metavar="N")
+    what.add_argument("--seed", type=seed, default=0, metavar="N")
     what.add_argument("--max-steps", type=_int, default=256, metavar="N")
     what.add_argument("--every", type=_int, default=1, metavar="K")
     what.add_argument("--quiet", action="store_true")
     what.add_argument(
         "--posterior",
-        type=_int,
+        type=at_least(4),
         metavar="N",
         help="design from the posterior (N NUTS draws per chain) instead of the "
         "fit's linearised covariance",
@@ -128,50 +141,111 @@ def add_design_command(commands, add_model_options, add_data_options, add_drive)
     lab.add_argument("--design-steps", type=_int, default=40, metavar="N")
 
 
+@dataclasses.dataclass(frozen=True)
+class Lab:
+    """The lab's limits of the designed test (the fields of `jaxcable.TestBudget`;
+    None: from the data, as `--duration-s` and `--noise-mm` say)."""
+
+    duration_s: float | None
+    max_force_fraction: float
+    speed_mm_per_min: tuple[float, float]
+    samples: int
+    blocks: int
+    noise_mm: float | None
+
+
+@dataclasses.dataclass(frozen=True)
+class DesignRequest:
+    """What `jaxcable design` was asked, as the values its flags give.
+
+    **Fields:**
+
+    - `model`, `data`: as for `jaxcable fit`.
+    - `fit`, `targets`: `--fit` and `--targets` as given (None: not given).
+    - `method`: the least-squares method of the fit.
+    - `posterior`: the sampler of `--posterior` and `--chains`, or None.
+    - `lab`: the lab's limits.
+    - `separate`: `--separate` as given, or None.
+    - `steps`: `--design-steps`.
+    - `out`, `quiet`: `--out`, `--quiet`.
+    """
+
+    model: ModelChoice
+    data: DataFiles
+    fit: str | None
+    targets: str | None
+    method: LeastSquares
+    posterior: NUTS | None
+    lab: Lab
+    separate: str | None
+    steps: int
+    out: str
+    quiet: bool = False
+
+
 def design_command(args) -> int:
-    """Run `jaxcable design`; the exit status."""
-    meter = progress_meter(args)
-    name, model = resolve_model(args, per_test_hint="design needs shared parameters.")
-    fit_names = names_option(args.fit, "--fit", model, name)
-    targets = names_option(args.targets, "--targets", model, name) or None
-    require_folder_of(args.out, "--out")
-    refuse_inputs([("--out", args.out)], [("DATA.csv", str(p)) for p in args.data])
-    args.per_test = None
-    separate = _pair(args.separate, targets)
-    tests, drives = read_described(args, meter)
-    model = data_start(args, model, tests, [d.drive for d in drives])
-    if args.duration_s is None:
-        args.duration_s = longest_duration(tests)
-        print(f"--duration-s: {args.duration_s:.6g} s, the longest measured test's")
+    """Run `jaxcable design` with the parsed command line `args`; the exit status."""
+    method = least_squares(args)
+    lab = Lab(
+        args.duration_s,
+        args.max_force_fraction,
+        args.speed,
+        args.samples,
+        args.blocks,
+        args.noise_mm,
+    )
+    request = DesignRequest(
+        model=ModelChoice(args.model, args.params),
+        data=DataFiles(tuple(args.data), data_options(args), args.every, args.drive),
+        fit=args.fit,
+        targets=args.targets,
+        method=method,
+        posterior=nuts(args) if args.posterior else None,
+        lab=lab,
+        separate=args.separate,
+        steps=args.design_steps,
+        out=args.out,
+        quiet=args.quiet,
+    )
+    return design_next(request)
+
+
+def design_next(request: DesignRequest) -> int:
+    """`jaxcable design` as `request` asks: the known tests fitted (or diagnosed,
+    with `separate`), the next test designed and written; the exit status."""
+    meter = progress_meter(request.quiet)
+    name, model = resolve_model(
+        request.model, per_test_hint="design needs shared parameters."
+    )
+    fit_names = names_option(request.fit, "--fit", model, name)
+    targets = names_option(request.targets, "--targets", model, name) or None
+    require_folder_of(request.out, "--out")
+    refuse_inputs(
+        [("--out", request.out)], [("DATA.csv", str(p)) for p in request.data.paths]
+    )
+    separate = _pair(request.separate, targets)
+    tests, drives = read_described(request.data, meter)
+    problem = Problem(
+        model, tests, fit=fit_names or None, drive=[d.drive for d in drives]
+    )
+    problem = data_start(problem, request.model)
+    lab = request.lab
+    if lab.duration_s is None:
+        lab = dataclasses.replace(lab, duration_s=longest_duration(tests))
+        print(f"--duration-s: {lab.duration_s:.6g} s, the longest measured test's")
     if separate:
-        known = run_diagnosis(
-            model,
-            name,
-            tests,
-            meter=meter,
-            fit_names=fit_names or None,
-            candidates=separate,
-            multistart=args.starts,
-            max_steps=args.max_steps,
-            key=jax.random.key(args.seed),
-            drive=[d.drive for d in drives],
+        search = CandidateSearch(
+            candidates=tuple(separate),
+            least_squares=request.method,
             discover=False,
             max_rounds=1,
         )
+        known = run_diagnosis(problem, name, search, meter)
         print()
         print(known.summary())
         print()
-        return _design_and_write(known, tests, args, None)
-    result = run_fit(
-        model,
-        name,
-        tests,
-        fit_names=fit_names,
-        per_test=[],
-        args=args,
-        meter=meter,
-        drive=[d.drive for d in drives],
-    )
+        return _design_and_write(known, tests, request, lab, None)
+    result = run_fit(problem, name, request.method, meter)
     print()
     print(result.summary())
     print()
@@ -181,13 +255,14 @@ def design_command(args) -> int:
     known = result
     # A breaking load without a breaking strain: the fitted model's strain there.
     tests = with_strain_from_load(tests, result.models)
-    if args.noise_mm is None and all(d.control != "force" for d in drives):
-        args.noise_mm = noise_through_compliance(result, tests)
-    if args.posterior:
-        known = run_posterior(model, name, tests, fit_names, args, drives, result)
+    if lab.noise_mm is None and all(d.control != "force" for d in drives):
+        lab = dataclasses.replace(lab, noise_mm=noise_through_compliance(result, tests))
+    if request.posterior:
+        problem = dataclasses.replace(problem, tests=tests)
+        known = run_posterior(problem, name, request.posterior, result)
         print(known.summary())
         print()
-    return _design_and_write(known, tests, args, targets)
+    return _design_and_write(known, tests, request, lab, targets)
 
 
 def longest_duration(tests) -> float:
@@ -232,33 +307,25 @@ def _pair(text: str | None, targets) -> list[str] | None:
     return ids
 
 
-def _design_and_write(known, tests, args, targets) -> int:
-    """Design from `known` (a fit, a posterior or a diagnosis), print the summary
-    and write --out; the exit status."""
+def _design_and_write(known, tests, request: DesignRequest, lab: Lab, targets) -> int:
+    """Design from `known` (a fit, a posterior or a diagnosis) within `lab`, print
+    the summary and write `--out`; the exit status."""
     try:
-        budget = TestBudget(
-            duration_s=args.duration_s,
-            max_force_fraction=args.max_force_fraction,
-            speed_mm_per_min=args.speed,
-            samples=args.samples,
-            blocks=args.blocks,
-            noise_mm=args.noise_mm,
-        )
-        designed = design_test(
-            known,
-            budget=budget,
-            cable=tests[0].cable(),
-            targets=targets,
-            steps=args.design_steps,
-        )
+        method = TestDesign(TestBudget(**dataclasses.asdict(lab)), steps=request.steps)
+        cable = tests[0].cable()
+        if isinstance(known, Diagnosis):
+            designed = design_discriminating_test(known, method, cable=cable)
+        else:
+            designed = design_test(known, method, cable=cable, targets=targets)
     except ValueError as e:
         raise CliError(f"cannot design the test: {e}") from None
     print(designed.summary())
     simulated = getattr(designed, "sd_after", getattr(designed, "separation", None))
     if not np.all(np.isfinite(simulated)):
         raise CliError("the designed test did not simulate.", status=1)
-    say_replacing([args.out], "--out")
-    with write_errors("--out", args.out):
-        designed.to_json(args.out)
-    print(f"wrote {args.out} (run it with: jaxcable simulate {args.out} --params ...)")
+    out = request.out
+    say_replacing([out], "--out")
+    with write_errors("--out", out):
+        designed.to_json(out)
+    print(f"wrote {out} (run it with: jaxcable simulate {out} --params ...)")
     return 0

@@ -2,45 +2,66 @@
 cause, and the gain on held-out data; with `--out`, the named extended model, fitted,
 as a PARAMS.json."""
 
+import dataclasses
 import os
 import pathlib
 import sys
 
-import jax
-
-from .._diagnose import Diagnosis, diagnose
-from .._models import AbstractCableModel
+from .._diagnose import CandidateSearch, Diagnosis, HeldOut, diagnose
+from .._problem import Problem
 from .._progress import AbstractProgressMeter
 from .._report import DIAGNOSIS_REPORT_FILES, write_diagnosis_report
-from .common import CliError, make_folder, progress_meter, require_folder_of
-from .fit import (
-    exported_kernels,
-    input_files,
-    named_files,
-    read_described,
-    report_files,
+from .common import (
+    CliError,
+    least_squares,
+    make_folder,
+    progress_meter,
+    require_folder_of,
 )
-from .models import data_start, resolve_model
-from .outputs import refuse_inputs, say_replacing, write_errors
+from .data import DataFiles, data_options, input_files, read_described
+from .fit import exported_kernels, named_files
+from .models import ModelChoice, data_start, resolve_model
+from .outputs import refuse_inputs, report_files, say_replacing, write_errors
+
+
+@dataclasses.dataclass(frozen=True)
+class DiagnoseRequest:
+    """What `jaxcable diagnose` was asked, as the values its flags give.
+
+    **Fields:**
+
+    - `model`: `--model` and `--params` (the base model).
+    - `data`: the data files and how to read them.
+    - `fit`: the base parameters to fit (`--fit`); None: the default set.
+    - `search`: how the cause is looked for: the candidates, the held-out data,
+        the fits and the rounds.
+    - `json`, `out`, `report`: `--json`, `--out`, `--report`.
+    - `quiet`: `--quiet`.
+    """
+
+    model: ModelChoice
+    data: DataFiles
+    fit: tuple[str, ...] | None
+    search: CandidateSearch
+    json: bool = False
+    out: str | None = None
+    report: str | None = None
+    quiet: bool = False
 
 
 def run_diagnosis(
-    model: AbstractCableModel,
-    name: str,
-    tests,
-    *,
-    meter: AbstractProgressMeter,
-    **options,
+    problem: Problem, name: str, search: CandidateSearch, meter: AbstractProgressMeter
 ) -> Diagnosis:
-    """`jaxcable.diagnose` of `tests` with base `model`, its progress shown by `meter`.
+    """`jaxcable.diagnose` of `problem` by `search`, its progress shown by
+    `meter`.
 
     **Arguments:**
 
-    - `model`: the base model and its start values.
-    - `name`: its command-line name, for the errors.
-    - `tests`: the measured tests.
+    - `problem`: the base model and its start values, the measured tests with their
+        drives, and the base parameters to fit.
+    - `name`: the model's command-line name, for the errors.
+    - `search`: the candidates, held-out data, fits and rounds.
     - `meter`: the progress meter (its bar and the news of each fit).
-    - `options`: the other keyword arguments of `jaxcable.diagnose`.
 
     **Returns:**
 
@@ -49,68 +70,85 @@ def run_diagnosis(
     # Every candidate's fits run as programs exported to the cache (see `run_fit`).
     with exported_kernels():
         try:
-            return diagnose(tests, model, progress_meter=meter, **options)
+            return diagnose(problem, search, progress_meter=meter)
         except ValueError as e:
             raise CliError(
-                f"{named_files(tests)}: cannot diagnose with model '{name}': {e}"
+                f"{named_files(problem.tests)}: cannot diagnose with model '{name}': {e}"
             ) from None
 
 
 def diagnose_command(args) -> int:
     """Run `jaxcable diagnose` with the parsed command line `args`; the exit status."""
+    request = DiagnoseRequest(
+        model=ModelChoice(args.model, args.params),
+        data=DataFiles(tuple(args.data), data_options(args), args.every, args.drive),
+        fit=tuple(args.fit.split(",")) if args.fit else None,
+        search=candidate_search(args),
+        json=args.json,
+        out=args.out,
+        report=args.report,
+        quiet=args.quiet,
+    )
+    return diagnose_files(request)
+
+
+def candidate_search(args) -> CandidateSearch:
+    """The search of the parsed command line `args`: `--candidates`, the held-out
+    data (`--split`, `--holdout`, `--folds`), the solver flags, `--max-rounds` and
+    `--family`; a value the search refuses is an error naming its flags."""
+    try:
+        heldout = HeldOut(split=args.split, fraction=args.holdout, folds=args.folds)
+    except ValueError as e:
+        raise CliError(f"--holdout, --folds: {e}") from None
+    candidates = tuple(args.candidates.split(",")) if args.candidates else None
+    try:
+        return CandidateSearch(
+            candidates=candidates,
+            heldout=heldout,
+            least_squares=least_squares(args),
+            max_rounds=args.max_rounds,
+            family={"auto": None, "always": True, "never": False}[args.family],
+        )
+    except ValueError as e:
+        raise CliError(f"--candidates: {e}") from None
+
+
+def diagnose_files(request: DiagnoseRequest) -> int:
+    """`jaxcable diagnose` as `request` asks: the diagnosis printed (one JSON object
+    with `json`, the log then on stderr), the extended model and the report
+    written; the exit status."""
     name, model = resolve_model(
-        args, per_test_hint="diagnose fits shared parameters; give start values."
+        request.model,
+        per_test_hint="diagnose fits shared parameters; give start values.",
     )
     # With --json, stdout carries the one JSON object; everything else goes to stderr.
-    log = sys.stderr if args.json else sys.stdout
-    meter = progress_meter(args, log)
-    if args.out:
-        require_folder_of(args.out, "--out")
-    if args.report:
-        require_folder_of(args.report, "--report")
-    inputs = input_files(args)
-    reports = report_files(args.report, DIAGNOSIS_REPORT_FILES) if args.report else []
-    outputs = [("--out", args.out)] if args.out else []
+    log = sys.stderr if request.json else sys.stdout
+    meter = progress_meter(request.quiet, log)
+    if request.out:
+        require_folder_of(request.out, "--out")
+    if request.report:
+        require_folder_of(request.report, "--report")
+    inputs = input_files(request.data, request.model.params)
+    reports = (
+        report_files(request.report, DIAGNOSIS_REPORT_FILES) if request.report else []
+    )
+    outputs = [("--out", request.out)] if request.out else []
     refuse_inputs(outputs + reports, inputs)
     # Read as every command reads; the drives resolved (and printed) once here: the
     # diagnosis then fits every fold and candidate with these drives.
-    tests, drives = read_described(args, meter, log)
-    model = data_start(args, model, tests, [d.drive for d in drives])
-    diagnosis = run_diagnosis(
-        model,
-        name,
-        tests,
-        meter=meter,
-        fit_names=args.fit.split(",") if args.fit else None,
-        candidates=args.candidates.split(",") if args.candidates else None,
-        split=args.split,
-        holdout=args.holdout,
-        folds=args.folds,
-        multistart=args.starts,
-        max_steps=args.max_steps,
-        key=jax.random.key(args.seed),
-        drive=[d.control for d in drives],
-        max_rounds=args.max_rounds,
-        family={"auto": None, "always": True, "never": False}[args.family],
-    )
-    if args.json:
+    tests, drives = read_described(request.data, meter, log)
+    problem = Problem(model, tests, fit=request.fit, drive=[d.control for d in drives])
+    problem = data_start(problem, request.model)
+    diagnosis = run_diagnosis(problem, name, request.search, meter)
+    if request.json:
         print(diagnosis.to_json())
     else:
         print(file=log)
         print(diagnosis.summary(), file=log)
-    if args.out:
-        # The named extended model, fitted (the base's fit when no cause is named).
-        say_replacing([args.out], "--out", log)
-        with write_errors("--out", args.out):
-            diagnosis.extended_fit().to_json(args.out)
-        what = (
-            f"the base with the named cause(s) {', '.join(diagnosis.causes)}"
-            if diagnosis.causes
-            else f"the fitted base model: no cause named (verdict {diagnosis.verdict})"
-        )
-        print(f"wrote {args.out}: {what}", file=log)
-    if args.report:
-        out = pathlib.Path(args.report)
+    if request.out:
+        _write_extended(request.out, diagnosis, log)
+    if request.report:
+        out = pathlib.Path(request.report)
         make_folder(out, "--report")
         say_replacing([path for _, path in reports], "--report", log)
         with write_errors("--report", out):
@@ -120,3 +158,17 @@ def diagnose_command(args) -> int:
             file=log,
         )
     return 0
+
+
+def _write_extended(path: str, diagnosis: Diagnosis, log) -> None:
+    """`--out`: the named extended model, fitted (the base's fit when no cause is
+    named), said on `log`."""
+    say_replacing([path], "--out", log)
+    with write_errors("--out", path):
+        diagnosis.extended_fit().to_json(path)
+    what = (
+        f"the base with the named cause(s) {', '.join(diagnosis.causes)}"
+        if diagnosis.causes
+        else f"the fitted base model: no cause named (verdict {diagnosis.verdict})"
+    )
+    print(f"wrote {path}: {what}", file=log)

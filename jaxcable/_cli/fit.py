@@ -2,16 +2,15 @@
 summary on stdout and optionally a report folder; with `--each`, every file fitted
 on its own (one `jaxcable.fit_each`), one PARAMS.json per file and a summary table."""
 
-import argparse
 import contextlib
 import csv
+import dataclasses
 import io
 import json
 import os
 import pathlib
 import warnings
 
-import jax
 import numpy as np
 
 from .._cache import exported_programs_dir
@@ -22,33 +21,52 @@ from .._fit import (
     cached_fit_kernels,
     fit,
     fit_each,
-    resolve_drives,
 )
-from .._models import AbstractCableModel
+from .._problem import LeastSquares, Problem
 from .._progress import AbstractProgressMeter
 from .._report import FIT_REPORT_FILES, write_report
-from .._uncertainty import Posterior, sample_posterior
-from .common import CliError, make_folder, progress_meter, require_folder_of
-from .data import data_options, describe_tests, read_measured
-from .limits import limits_note, with_strain_from_load
-from .models import data_start, names_option, resolve_model
-from .outputs import refuse_inputs, say_replacing, write_errors
+from .._uncertainty import NUTS, Posterior, sample_posterior
+from .common import (
+    CliError,
+    least_squares,
+    make_folder,
+    nuts,
+    progress_meter,
+    require_folder_of,
+)
+from .data import DataFiles, data_options, input_files, read_described
+from .limits import with_strain_from_load
+from .models import ModelChoice, data_start, names_option, resolve_model
+from .numbers import at_least
+from .outputs import refuse_inputs, report_files, say_replacing, write_errors
 
 
-def input_files(args) -> list[tuple[str, str]]:
-    """(what, path) of the files a fit or diagnosis reads: its data and `--params`."""
-    inputs = [("DATA.csv", str(path)) for path in args.data]
-    if args.params:
-        inputs.append(("--params", args.params))
-    return inputs
+@dataclasses.dataclass(frozen=True)
+class FitRequest:
+    """What `jaxcable fit` was asked, as the values its flags give.
 
+    **Fields:**
 
-def report_files(folder, names) -> list[tuple[str, pathlib.Path]]:
-    """(option, path) of the files of a `--report` folder; fails when the folder is
-    an existing file."""
-    if os.path.exists(folder) and not os.path.isdir(folder):
-        raise CliError(f"--report {folder}: is a file, not a folder.")
-    return [("--report", pathlib.Path(folder) / name) for name in names]
+    - `model`: `--model` and `--params`.
+    - `data`: the data files and how to read them.
+    - `fit`, `per_test`: the `--fit` and `--per-test` lists as given (None: not
+        given).
+    - `method`: `--starts`, `--max-steps` and `--seed` as the least-squares method.
+    - `posterior`: the sampler of `--posterior` and `--chains`, or None.
+    - `out`, `each`, `report`: `--out`, `--each`, `--report`.
+    - `quiet`: `--quiet`.
+    """
+
+    model: ModelChoice
+    data: DataFiles
+    fit: str | None
+    per_test: str | None
+    method: LeastSquares
+    posterior: NUTS | None = None
+    out: str = "params.json"
+    each: bool = False
+    report: str | None = None
+    quiet: bool = False
 
 
 def named_files(tests) -> str:
@@ -69,34 +87,24 @@ def exported_kernels() -> contextlib.AbstractContextManager:
 
 
 def run_fit(
-    model: AbstractCableModel,
-    name: str,
-    tests,
-    *,
-    fit_names: list[str],
-    per_test: list[str],
-    args,
-    meter: AbstractProgressMeter,
-    drive="auto",
+    problem: Problem, name: str, method: LeastSquares, meter: AbstractProgressMeter
 ) -> FitResult:
-    """`jaxcable.fit` with the command line's solver options.
+    """`jaxcable.fit` of `problem` by `method`, its progress shown by `meter`.
 
     **Arguments:**
 
-    - `model`: the model and its start values.
-    - `name`: its command-line name, for the errors.
-    - `tests`: the measured tests.
-    - `fit_names`, `per_test`: the parameters to fit, and those fitted per test
-        (empty: the defaults of `jaxcable.fit`).
-    - `args`: the parsed command line (`starts`, `max_steps`, `seed`).
+    - `problem`: the start model, the measured tests with their drives, and the
+        parameters to fit (and those fitted per test).
+    - `name`: the model's command-line name, for the errors.
+    - `method`: the least-squares method (`--starts`, `--max-steps`, `--seed`).
     - `meter`: the progress meter.
-    - `drive`: the drive of every test (see `jaxcable.fit`).
 
     **Returns:**
 
     The fit, converged or not; identifiability warnings are in its `warnings` (and
     printed with its summary), not issued.
     """
+    tests = problem.tests
     n = sum(int(np.sum(t.mask)) for t in tests)
     label = f"fitting {name} to {len(tests)} test(s), {n} samples"
     with (
@@ -106,49 +114,11 @@ def run_fit(
     ):
         warnings.simplefilter("ignore", IdentifiabilityWarning)
         try:
-            return fit(
-                model,
-                tests,
-                fit=fit_names or None,
-                per_test=per_test or None,
-                multistart=args.starts,
-                max_steps=args.max_steps,
-                key=jax.random.key(args.seed),
-                throw=False,
-                drive=drive,
-            )
+            return fit(problem, method, throw=False)
         except ValueError as e:
             raise CliError(
                 f"{named_files(tests)}: cannot fit model '{name}': {e}"
             ) from None
-
-
-def test_drives(tests, drive: str):
-    """Each test's drive with its reason (`--drive`, the file's `control` line, or
-    detected from the data)."""
-    try:
-        return resolve_drives(tests, drive)
-    except ValueError as e:
-        raise CliError(f"--drive: {e}") from None
-
-
-def read_described(args, meter: AbstractProgressMeter, log=None):
-    """(tests, drives with their reasons) of the data files, read as every command
-    reads them, after printing one line per file (and what limits the material) on
-    `log` (default stdout); fails naming file, line and column where a
-    force-driven test's force is negative beyond its noise."""
-    measured = read_measured(args.data, data_options(args), args.every, meter)
-    tests = [test for test, _ in measured]
-    drives = test_drives(tests, args.drive)
-    for (_, error), drive in zip(measured, drives):
-        if error is not None and drive.control == "force":
-            raise CliError(error)
-    print(f"read {len(tests)} file(s):", file=log)
-    print("\n".join(describe_tests(tests, args.every, drives)), file=log)
-    note = limits_note(tests)
-    if note:
-        print(note, file=log)
-    return tests, drives
 
 
 def fit_failure(result: FitResult) -> CliError | None:
@@ -171,38 +141,52 @@ def fit_failure(result: FitResult) -> CliError | None:
 
 def fit_command(args) -> int:
     """Run `jaxcable fit` with the parsed command line `args`; the exit status."""
-    meter = progress_meter(args)
+    request = FitRequest(
+        model=ModelChoice(args.model, args.params),
+        data=DataFiles(tuple(args.data), data_options(args), args.every, args.drive),
+        fit=args.fit,
+        per_test=args.per_test,
+        method=least_squares(args),
+        posterior=nuts(args) if args.posterior else None,
+        out=args.out,
+        each=args.each,
+        report=args.report,
+        quiet=args.quiet,
+    )
+    return fit_files(request)
+
+
+def fit_files(request: FitRequest) -> int:
+    """`jaxcable fit` as `request` asks: the fit written as PARAMS.json (one per
+    file with `each`), its summary printed, and the report written; the exit
+    status (1 when the fit failed or did not converge)."""
+    meter = progress_meter(request.quiet)
     name, model = resolve_model(
-        args,
+        request.model,
         per_test_hint="use a plain {name: value} file of start values with --params.",
     )
-    fit_names = names_option(args.fit, "--fit", model, name)
-    per_test = names_option(args.per_test, "--per-test", model, name)
-    require_folder_of(args.out, "--out")
-    if args.posterior and (args.each or per_test):
+    fit_names = names_option(request.fit, "--fit", model, name)
+    per_test = names_option(request.per_test, "--per-test", model, name)
+    require_folder_of(request.out, "--out")
+    if request.posterior and (request.each or per_test):
         raise CliError(
             "--posterior: not available with --each or --per-test (the posterior "
             "samples one shared parameter set)."
         )
-    if args.each:
-        return each_command(args, meter, model, name, fit_names, per_test)
-    outputs = [("--out", args.out)]
-    if args.report:
-        names = FIT_REPORT_FILES + ((_POSTERIOR_PNG,) if args.posterior else ())
-        outputs += report_files(args.report, names)
-    refuse_inputs(outputs, input_files(args))
-    tests, drives = read_described(args, meter)
-    model = data_start(args, model, tests, [d.drive for d in drives])
-    result = run_fit(
+    outputs = _each_outputs(request) if request.each else _fit_outputs(request)
+    refuse_inputs(outputs, input_files(request.data, request.model.params))
+    tests, drives = read_described(request.data, meter)
+    problem = Problem(
         model,
-        name,
         tests,
-        fit_names=fit_names,
+        fit=fit_names or None,
         per_test=per_test,
-        args=args,
-        meter=meter,
         drive=[d.drive for d in drives],
     )
+    if request.each:
+        return each_files(problem, name, request, outputs, meter)
+    problem = data_start(problem, request.model)
+    result = run_fit(problem, name, request.method, meter)
     failure = fit_failure(result)
     print()
     print(result.summary())
@@ -213,43 +197,55 @@ def fit_command(args) -> int:
         raise failure
     # What a file's breaking load means for the fitted material (said, not imposed:
     # the next simulation with this PARAMS.json imposes it).
-    with_strain_from_load(tests, result.models)
+    with_strain_from_load(problem.tests, result.models)
     posterior = None
-    if args.posterior and failure is None:
-        posterior = run_posterior(model, name, tests, fit_names, args, drives, result)
+    if request.posterior and failure is None:
+        posterior = run_posterior(problem, name, request.posterior, result)
         print(posterior.summary())
         print()
-    elif args.posterior:
+    elif request.posterior:
         print("--posterior: not sampled, the fit did not converge.")
-    say_replacing([args.out], "--out")
-    with write_errors("--out", args.out):
-        write_params(args.out, result, posterior)
-    print(f"wrote {args.out}")
-    if args.report:
-        out = pathlib.Path(args.report)
-        make_folder(out, "--report")
-        notes = [f"files: {', '.join(str(p) for p in args.data)}"]
-        if args.no_slack:
-            notes.append("slack detection off (--no-slack)")
-        if args.every > 1:
-            notes.append(f"1 sample in {args.every} fitted (--every)")
-        say_replacing([path for _, path in outputs[1:]], "--report")
-        with write_errors("--report", out):
-            written = write_report(
-                out,
-                result,
-                tests,
-                title=f"jaxcable fit: model '{name}'",
-                notes=notes,
-                progress_meter=meter,
-                posterior=posterior,
-            )
-        print(
-            f"wrote the report to {out}{os.sep}: {', '.join(p.name for p in written)}"
-        )
+    say_replacing([request.out], "--out")
+    with write_errors("--out", request.out):
+        write_params(request.out, result, posterior)
+    print(f"wrote {request.out}")
+    if request.report:
+        _write_fit_report(request, name, result, posterior, problem.tests, meter)
     if failure is not None:
         raise failure
     return 0
+
+
+def _fit_outputs(request: FitRequest) -> list[tuple[str, str | pathlib.Path]]:
+    """(option, path) of the files a fit writes: `--out`, then the report's."""
+    outputs: list[tuple[str, str | pathlib.Path]] = [("--out", request.out)]
+    if request.report:
+        names = FIT_REPORT_FILES + ((_POSTERIOR_PNG,) if request.posterior else ())
+        outputs += report_files(request.report, names)
+    return outputs
+
+
+def _write_fit_report(request, name, result, posterior, tests, meter) -> None:
+    """The `--report` folder of a fit (and of its posterior, if any)."""
+    out = pathlib.Path(request.report)
+    make_folder(out, "--report")
+    notes = [f"files: {', '.join(str(p) for p in request.data.paths)}"]
+    if not request.data.reading.options.detect_slack:
+        notes.append("slack detection off (--no-slack)")
+    if request.data.every > 1:
+        notes.append(f"1 sample in {request.data.every} fitted (--every)")
+    say_replacing([path for _, path in _fit_outputs(request)[1:]], "--report")
+    with write_errors("--report", out):
+        written = write_report(
+            out,
+            result,
+            tests,
+            title=f"jaxcable fit: model '{name}'",
+            notes=notes,
+            progress_meter=meter,
+            posterior=posterior,
+        )
+    print(f"wrote the report to {out}{os.sep}: {', '.join(p.name for p in written)}")
 
 
 # The pair plot `write_report` adds for a posterior (`jaxcable._report`'s
@@ -257,24 +253,17 @@ def fit_command(args) -> int:
 _POSTERIOR_PNG = "posterior.png"
 
 
-def run_posterior(model, name, tests, fit_names, args, drives, result) -> Posterior:
-    """`jaxcable.sample_posterior` started from the fit `result`, with
-    `args.posterior` draws per chain, `args.chains` chains, as many warm-up steps
-    (at least 200) and the key of `--seed`."""
-    n = args.posterior
-    print(f"sampling the posterior: {args.chains} chains x {n} draws (NUTS)")
+def run_posterior(
+    problem: Problem, name: str, method: NUTS, result: FitResult
+) -> Posterior:
+    """`jaxcable.sample_posterior` of `problem` by `method`, started from the fit
+    `result`; said on stdout first."""
+    print(
+        f"sampling the posterior: {method.num_chains} chains x "
+        f"{method.num_samples} draws (NUTS)"
+    )
     try:
-        return sample_posterior(
-            model,
-            tests,
-            fit=fit_names or None,
-            drive=[d.drive for d in drives],
-            num_samples=n,
-            num_chains=args.chains,
-            num_warmup=max(n, 200),
-            key=jax.random.key(args.seed),
-            start=result,
-        )
+        return sample_posterior(problem, method, start=result)
     except ValueError as e:
         raise CliError(f"--posterior: cannot sample model '{name}': {e}") from None
 
@@ -295,28 +284,12 @@ def write_params(path, result: FitResult, posterior: Posterior | None) -> None:
     write_text_atomic(path, json.dumps(document, indent=2) + "\n")
 
 
-def _at_least(low: int):
-    """An argparse `type`: an integer >= `low` (draws or chains)."""
-
-    def parse(text: str) -> int:
-        shown = text if len(text) <= 30 else f"{text[:20]}... ({len(text)} characters)"
-        try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{shown!r} is not an integer") from None
-        if value < low:
-            raise argparse.ArgumentTypeError(f"{shown} must be at least {low}")
-        return value
-
-    return parse
-
-
 def add_out_options(parser) -> None:
     """`--out`, `--each` and the posterior options of `jaxcable fit`."""
     group = parser.add_argument_group("posterior")
     group.add_argument(
         "--posterior",
-        type=_at_least(4),
+        type=at_least(4),
         metavar="N",
         help="after the fit, sample the Bayesian posterior of the fitted parameters "
         "by NUTS (jaxcable.sample_posterior): N draws per chain; its summary (mean, "
@@ -326,7 +299,7 @@ def add_out_options(parser) -> None:
     )
     group.add_argument(
         "--chains",
-        type=_at_least(2),
+        type=at_least(2),
         default=4,
         metavar="N",
         help="chains of --posterior (default: 4)",
@@ -346,16 +319,16 @@ def add_out_options(parser) -> None:
     )
 
 
-def _each_outputs(args) -> list[tuple[str, pathlib.Path]]:
+def _each_outputs(request: FitRequest) -> list[tuple[str, str | pathlib.Path]]:
     """(option, path) of the files `--each` writes: one PARAMS.json per data file,
     then summary.csv; fails when two files would write the same PARAMS.json."""
-    if args.report:
+    if request.report:
         raise CliError("--report: not available with --each (one fit per file).")
-    folder = pathlib.Path(args.out)
+    folder = pathlib.Path(request.out)
     if folder.exists() and not folder.is_dir():
         raise CliError(f"--out {folder}: is a file; with --each it is a folder.")
     seen: dict[str, str] = {}
-    for path in args.data:
+    for path in request.data.paths:
         stem = pathlib.Path(path).stem
         if stem in seen:
             raise CliError(
@@ -393,34 +366,27 @@ def _print_summary(header: list[str], rows: list[list]) -> None:
         )
 
 
-def each_command(args, meter, model, name: str, fit_names, per_test) -> int:
-    """`jaxcable fit --each`: every data file fitted on its own by one
+def each_files(problem: Problem, name: str, request: FitRequest, outputs, meter) -> int:
+    """`jaxcable fit --each`: every test of `problem` fitted on its own by one
     `jaxcable.fit_each`; writes FILE.PARAMS.json per fitted file and summary.csv to
-    the `--out` folder; the exit status (1 when a fit failed or did not converge)."""
-    outputs = _each_outputs(args)
-    refuse_inputs(outputs, input_files(args))
-    tests, drives = read_described(args, meter)
+    the `--out` folder (`outputs`, [`_each_outputs`][]); the exit status (1 when a
+    fit failed or did not converge)."""
+    # One problem per file, each with its test's drive; the same start and names.
+    problems = [
+        Problem(problem.model, (test,), problem.fit, problem.per_test, drive=(drive,))
+        for test, drive in zip(problem.tests, problem.drive)
+    ]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", IdentifiabilityWarning)
         try:
-            results = fit_each(
-                model,
-                [[t] for t in tests],
-                fit=fit_names or None,
-                per_test=per_test or None,
-                multistart=args.starts,
-                max_steps=args.max_steps,
-                key=jax.random.key(args.seed),
-                drive=[d.drive for d in drives],
-                progress_meter=meter,
-            )
+            results = fit_each(problems, request.method, progress_meter=meter)
         except ValueError as e:
             raise CliError(f"cannot fit model '{name}': {e}") from None
-    header, rows = _summary_rows(args.data, results)
+    header, rows = _summary_rows(request.data.paths, results)
     print()
     _print_summary(header, rows)
     print()
-    folder = pathlib.Path(args.out)
+    folder = pathlib.Path(request.out)
     make_folder(folder, "--out")
     say_replacing([path for _, path in outputs], "--out")
     written = 0

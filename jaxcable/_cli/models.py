@@ -13,7 +13,7 @@ import equinox as eqx
 import numpy as np
 
 from .. import _checks
-from .._fit import FitResult, scaled_start
+from .._fit import FitResult
 from .._io import read_json
 from .._models import (
     BY_CLI_NAME,
@@ -23,6 +23,7 @@ from .._models import (
     describe,
     innermost,
 )
+from .._problem import Problem
 from .common import CliError
 
 
@@ -165,7 +166,26 @@ def _select_test(path: str, result: FitResult, test: str | None, purpose: str):
     )
 
 
-def resolve_model(args, *, per_test_hint: str) -> tuple[str, AbstractCableModel]:
+@dataclasses.dataclass(frozen=True)
+class ModelChoice:
+    """The model a command was asked for: `--model`, `--params` and, for
+    `simulate`, `--test`.
+
+    **Fields:**
+
+    - `name`: the `--model` name, or None when it was not given.
+    - `params`: the `--params` file, or None.
+    - `test`: the `--test` id or index of a PARAMS.json with per-test parameters.
+    """
+
+    name: str | None = None
+    params: str | None = None
+    test: str | None = None
+
+
+def resolve_model(
+    choice: ModelChoice, *, per_test_hint: str
+) -> tuple[str, AbstractCableModel]:
     """The model of a command, from `--model` and `--params`.
 
     `--params` is either a plain {name: value} object of SI values replacing the
@@ -175,8 +195,7 @@ def resolve_model(args, *, per_test_hint: str) -> tuple[str, AbstractCableModel]
 
     **Arguments:**
 
-    - `args`: the parsed command line (`model`, `params`, and `test` if the command
-        has it).
+    - `choice`: the model asked for.
     - `per_test_hint`: what to do instead, said when the PARAMS.json holds per-test
         parameters and no test is chosen.
 
@@ -185,11 +204,11 @@ def resolve_model(args, *, per_test_hint: str) -> tuple[str, AbstractCableModel]
     (the model's command-line name, e.g. `integrated` or, for extensions around
     a base, `bedding-in(integrated)`; the model).
     """
-    requested = args.model
-    if not args.params:
+    requested = choice.name
+    if not choice.params:
         name = requested or DEFAULT_CLI_MODEL
         return name, _build_model(name, {}, None)
-    path = args.params
+    path = choice.params
     doc = read_json(path, "parameters")
     if isinstance(doc, dict) and doc.get("format") == "jaxcable-params":
         result = _read_fit(path, doc)
@@ -201,33 +220,29 @@ def resolve_model(args, *, per_test_hint: str) -> tuple[str, AbstractCableModel]
                 f"{path}: holds a fit of model '{name}', not '{requested}' "
                 f"(--model); drop --model or pass --model {base}."
             )
-        model = _select_test(path, result, getattr(args, "test", None), per_test_hint)
-        return name, model
+        return name, _select_test(path, result, choice.test, per_test_hint)
     name = requested or DEFAULT_CLI_MODEL
     params = _check_plain_params(path, doc, BY_CLI_NAME[name].cls, name)
     return name, _build_model(name, params, path)
 
 
-def data_start(args, model: AbstractCableModel, tests, drives) -> AbstractCableModel:
-    """The start of a command that fits `tests`: the model `--params` gives, as
-    given (a fit moves it only if it fails on a test); with no `--params`, the
-    default model scaled to the data ([`jaxcable.scaled_start`][]: its moduli to the
-    first loading, its times to the holds when far off).
+def data_start(problem: Problem, choice: ModelChoice) -> Problem:
+    """The start of a command that fits measured tests: the model `--params` gives,
+    as given (a fit moves it only if it fails on a test); with no `--params`, the
+    default model scaled to the data ([`jaxcable.Problem.with_scaled_start`][]: its
+    moduli to the first loading, its times to the holds when far off).
 
     **Arguments:**
 
-    - `args`: the parsed command line (`params`).
-    - `model`: the model of `resolve_model`.
-    - `tests`: the data read.
-    - `drives`: each test's drive.
+    - `problem`: the model of [`resolve_model`][] and the tests read, with their
+        drives.
+    - `choice`: the model asked for (whether `--params` was given).
 
     **Returns:**
 
-    The start model.
+    `problem` with its start model.
     """
-    if args.params:
-        return model
-    return scaled_start(model, tests, drive=list(drives))
+    return problem if choice.params else problem.with_scaled_start()
 
 
 def params_metadata(model: AbstractCableModel) -> str:

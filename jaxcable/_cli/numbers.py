@@ -33,8 +33,13 @@ def number(
     return parse
 
 
-positive_int = number(int, "an integer", lambda v: v >= 1, "must be at least 1")
-non_negative_int = number(int, "an integer", lambda v: v >= 0, "must be at least 0")
+def at_least(low: int) -> Callable[[str], int]:
+    """An argparse `type`: an integer >= `low`."""
+    return number(int, "an integer", lambda v: v >= low, f"must be at least {low}")
+
+
+positive_int = at_least(1)
+non_negative_int = at_least(0)
 # jax.random.key takes a 64-bit signed integer.
 seed = number(
     int,

@@ -88,3 +88,11 @@ def writing(option: str, path: str | os.PathLike) -> Iterator[pathlib.Path]:
     `jaxcable._files.atomic_path`); errors as in `write_errors`."""
     with write_errors(option, path), atomic_path(path) as tmp:
         yield tmp
+
+
+def report_files(folder, names) -> list[tuple[str, pathlib.Path]]:
+    """(option, path) of the files of a `--report` folder; fails when the folder is
+    an existing file."""
+    if os.path.exists(folder) and not os.path.isdir(folder):
+        raise CliError(f"--report {folder}: is a file, not a folder.")
+    return [("--report", pathlib.Path(folder) / name) for name in names]

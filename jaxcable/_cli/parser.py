@@ -12,7 +12,7 @@ from .._models import (
     PARK_IDENTIFIABLE,
 )
 from .cache import cache_command
-from .common import PROG, CliError
+from .common import PROG, CliError, add_choice
 from .data import add_data_options as _add_data_options
 from .demo import demo_command
 from .design import add_design_command as _design
@@ -69,11 +69,11 @@ def _add_report_data_and_fit(parser, report: str, title: str, what: str, rest: s
 
 
 def _add_drive_option(parser, what: str) -> None:
-    parser.add_argument(
+    add_choice(
+        parser,
         "--drive",
-        choices=("auto", "force", "elongation"),
-        default="auto",
-        help=f"which measured channel drives the model {what}: force (force "
+        ("auto", "force", "elongation"),
+        f"which measured channel drives the model {what}: force (force "
         "control: creep, load cycles; the elongation is scored), elongation "
         "(displacement control: relaxation, constant crosshead rate; the force is "
         "solved and scored), or auto (default: the file's '# control:' line, else "
@@ -336,6 +336,14 @@ def _diagnose(commands) -> None:
         "base parameters",
         "",
     )
+    _add_search_options(how)
+    _add_drive_option(diag, "of each test (fixed for every fold and candidate)")
+    _add_solver_options(diag, starts=1)
+
+
+def _add_search_options(how) -> None:
+    """How `jaxcable diagnose` looks for a cause: `--candidates`, the held-out data
+    (`--split`, `--folds`, `--holdout`), `--max-rounds` and `--family`."""
     how.add_argument(
         "--candidates",
         metavar="IDS",
@@ -343,11 +351,11 @@ def _diagnose(commands) -> None:
         f"of the catalogue, and {', '.join(COVARIATE_EXTENSIONS)} for each extra "
         "column every test records)",
     )
-    how.add_argument(
+    add_choice(
+        how,
         "--split",
-        choices=("time", "tests"),
-        default="time",
-        help="held-out data: 'time', the last --holdout of every test (default); "
+        ("time", "tests"),
+        "held-out data: 'time', the last --holdout of every test (default); "
         "'tests', cross-validation over whole tests (--folds; one fit per fold "
         "and candidate)",
     )
@@ -374,17 +382,15 @@ def _diagnose(commands) -> None:
         help="look for at most N causes, one per round, each round with the causes "
         "named before in the model (default: 3; 1 stops after the first cause)",
     )
-    how.add_argument(
+    add_choice(
+        how,
         "--family",
-        choices=("auto", "always", "never"),
-        default="auto",
-        help="fit the other base models (integrated, five-element, burgers, "
+        ("auto", "always", "never"),
+        "fit the other base models (integrated, five-element, burgers, "
         "bouc-wen, findley) on the same split and go on with the one the data want: "
         "auto (default) when the base is far from the data (held-out RMSE >= 10 x "
         "the noise, residual systematic), always, or never",
     )
-    _add_drive_option(diag, "of each test (fixed for every fold and candidate)")
-    _add_solver_options(diag, starts=1)
 
 
 def _demo(commands) -> None:

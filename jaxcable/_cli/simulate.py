@@ -18,9 +18,9 @@ from .._drive import (
 from .._io import TestData, read_protocol, resolve_control, write_csv
 from .._results import RESULTS
 from .common import CliError, require_folder_of
-from .data import data_options, pushing_error, read_data
+from .data import Reading, data_options, pushing_error, read_data
 from .limits import with_strain_from_load
-from .models import params_metadata, resolve_model
+from .models import ModelChoice, params_metadata, resolve_model
 from .outputs import refuse_inputs, say_replacing, writing
 
 
@@ -73,41 +73,61 @@ def _check_times(time: np.ndarray, where: Callable[[int], str]) -> None:
         )
 
 
-def _write(args, data: TestData) -> None:
-    """Write `data` to `--out` atomically, saying so when it replaces a file."""
-    say_replacing([args.out], "--out")
-    with writing("--out", args.out) as tmp:
+@dataclasses.dataclass(frozen=True)
+class SimulateRequest:
+    """What `jaxcable simulate` was asked, as the values its flags give.
+
+    **Fields:**
+
+    - `input`: the protocol (`.json`) or history (`.csv`) file.
+    - `out`: `--out`.
+    - `model`: `--model`, `--params` and `--test`.
+    - `reading`: how to read a history ([`data_options`][]).
+    - `drive`: `--drive` of a history.
+    """
+
+    input: str
+    out: str
+    model: ModelChoice
+    reading: Reading
+    drive: str = "auto"
+
+
+def _write(out: str, data: TestData) -> None:
+    """Write `data` to `out` (`--out`) atomically, saying so when it replaces a
+    file."""
+    say_replacing([out], "--out")
+    with writing("--out", out) as tmp:
         write_csv(tmp, data)
 
 
-def _history_drive(args) -> tuple[TestData, AbstractTestDrive]:
+def _history_drive(request: SimulateRequest) -> tuple[TestData, AbstractTestDrive]:
     """The history file, read for its drive, and the drive: `--drive`, else the
     file's `control` line, else the channel it has (detected when it has both)."""
-    options = data_options(args)
-    data = read_data(args.input, options, require_force=False)
+    data = read_data(request.input, request.reading, require_force=False)
     has_force = bool(np.all(np.isfinite(data.force)))
-    if args.drive != "auto" or data.control is not None:
-        drive = resolve_control(data, args.drive).drive
+    if request.drive != "auto" or data.control is not None:
+        drive = resolve_control(data, request.drive).drive
     elif data.elongation is None or not has_force:
         drive = FORCE_DRIVEN if data.elongation is None else ELONGATION_DRIVEN
     else:
         drive = resolve_control(data, "auto").drive
     if drive == FORCE_DRIVEN and not has_force:
         # The reader's own located error for the missing force column.
-        read_data(args.input, options)
+        read_data(request.input, request.reading)
     if drive.imposed_of(data) is None:
         raise CliError(
-            f"{args.input}: an {drive.name}-driven history needs an "
+            f"{request.input}: an {drive.name}-driven history needs an "
             f"{_COLUMN[drive.imposed]} column."
         )
     return data, drive
 
 
-def _simulate_history(args) -> int:
-    data, drive = _history_drive(args)
+def _simulate_history(request: SimulateRequest) -> int:
+    data, drive = _history_drive(request)
     if drive == FORCE_DRIVEN:
         _check_force(data, data.cable())
-    name, model = resolve_model(args, per_test_hint=_PER_TEST)
+    name, model = resolve_model(request.model, per_test_hint=_PER_TEST)
     # A breaking load without a breaking strain: the strain the model reaches there
     # (the limit of this run, not written to the output).
     (limited,) = with_strain_from_load([data], [model])
@@ -116,7 +136,7 @@ def _simulate_history(args) -> int:
     # re-simulates the file it was fitted to exactly as the fit saw it.
     traj = drive.simulate(model, cable, data.time, drive.imposed_of(data), throw=False)
     _check_success(
-        traj, name, lambda i: str(args.input) if i is None else data.locate(i)
+        traj, name, lambda i: str(request.input) if i is None else data.locate(i)
     )
     metadata = dict(data.metadata)
     # Record the cable the simulation assumed where the file left it to defaults.
@@ -124,62 +144,76 @@ def _simulate_history(args) -> int:
     metadata.setdefault("rate_mm_per_min", float(cable.speed) * 1e3 * 60)
     metadata["model"] = name
     metadata["control"] = drive.name
-    if args.params:
+    if request.model.params:
         metadata["model_params"] = params_metadata(model)
     simulated = {drive.scored: np.asarray(drive.scored_of(traj))}
     out = dataclasses.replace(data, **simulated, metadata=metadata)
-    _write(args, out)
+    _write(request.out, out)
     print(
-        f"wrote {args.out} ({data.num_samples} samples, {_COLUMN[drive.scored]} "
+        f"wrote {request.out} ({data.num_samples} samples, {_COLUMN[drive.scored]} "
         f"simulated by model '{name}', {drive.name} drive)"
     )
     return 0
 
 
-def _simulate_protocol(args) -> int:
-    given = [
-        option
-        for option, value in (
-            ("--columns", args.columns),
-            ("--skip-rows", args.skip_rows),
-            ("--length-mm", args.length_mm),
-            ("--diameter-mm", args.diameter_mm),
-            ("--rate-mm-per-min", args.rate_mm_per_min),
-            ("--no-slack", args.no_slack or None),
-        )
-        if value is not None
+# The data options a protocol refuses (its file gives the cable), by their key
+# in `read_test`'s metadata.
+_HISTORY_ONLY = (
+    ("length_mm", "--length-mm"),
+    ("diameter_mm", "--diameter-mm"),
+    ("rate_mm_per_min", "--rate-mm-per-min"),
+)
+
+
+def _history_only(reading: Reading) -> list[str]:
+    """The data options given that read a history, not a protocol, in the order of
+    the help."""
+    given = ["--columns"] if reading.columns is not None else []
+    if reading.options.skip_rows is not None:
+        given.append("--skip-rows")
+    given += [
+        flag for key, flag in _HISTORY_ONLY if reading.metadata.get(key) is not None
     ]
+    if not reading.options.detect_slack:
+        given.append("--no-slack")
+    return given
+
+
+def _simulate_protocol(request: SimulateRequest) -> int:
+    given = _history_only(request.reading)
     if given:
         raise CliError(
             f"{given[0]}: reads a HISTORY.csv; a protocol file gives its cable itself."
         )
-    spec = read_protocol(args.input)
-    if args.breaking_strain is not None:
+    path = request.input
+    spec = read_protocol(path)
+    breaking_strain = request.reading.metadata.get("breaking_strain")
+    if breaking_strain is not None:
         cable = eqx.tree_at(
-            lambda c: c.breaking_strain, spec.cable, float(args.breaking_strain)
+            lambda c: c.breaking_strain, spec.cable, float(breaking_strain)
         )
         spec = spec._replace(cable=cable)
-    name, model = resolve_model(args, per_test_hint=_PER_TEST)
+    name, model = resolve_model(request.model, per_test_hint=_PER_TEST)
     traj = simulate_rate_test(model, spec.cable, spec.protocol, throw=False)
 
     def where(i):
         segment = spec.segment_of(i) if i is not None else None
-        return args.input if segment is None else f"{args.input}, segments[{segment}]"
+        return path if segment is None else f"{path}, segments[{segment}]"
 
     _check_success(traj, name, where)
     _check_times(np.asarray(traj.time), where)
     given = {}
-    if args.breaking_strain is not None:
-        given["breaking_strain"] = float(args.breaking_strain)
+    if breaking_strain is not None:
+        given["breaking_strain"] = float(breaking_strain)
     metadata = {
         **spec.metadata,
         **given,
-        "protocol": pathlib.Path(args.input).name,
+        "protocol": pathlib.Path(path).name,
         "model": name,
         # A fit of this file drives it by its force history, as it was made.
         "control": FORCE_DRIVEN.name,
     }
-    if args.params:
+    if request.model.params:
         metadata["model_params"] = params_metadata(model)
     data = TestData(
         time=np.asarray(traj.time),
@@ -187,10 +221,10 @@ def _simulate_protocol(args) -> int:
         elongation=np.asarray(traj.elongation),
         metadata=metadata,
     )
-    _write(args, data)
+    _write(request.out, data)
     duration = float(data.time[-1])
     print(
-        f"wrote {args.out} ({data.num_samples} samples over {duration:.6g} s, "
+        f"wrote {request.out} ({data.num_samples} samples over {duration:.6g} s, "
         f"model '{name}')"
     )
     return 0
@@ -198,11 +232,24 @@ def _simulate_protocol(args) -> int:
 
 def simulate_command(args) -> int:
     """Run `jaxcable simulate` with the parsed command line `args`; the exit status."""
-    require_folder_of(args.out, "--out")
-    inputs = [("PROTOCOL.json|HISTORY.csv", args.input)]
-    if args.params:
-        inputs.append(("--params", args.params))
-    refuse_inputs([("--out", args.out)], inputs)
-    if args.input.lower().endswith(".json"):
-        return _simulate_protocol(args)
-    return _simulate_history(args)
+    request = SimulateRequest(
+        input=args.input,
+        out=args.out,
+        model=ModelChoice(args.model, args.params, args.test),
+        reading=data_options(args),
+        drive=args.drive,
+    )
+    return simulate_file(request)
+
+
+def simulate_file(request: SimulateRequest) -> int:
+    """`jaxcable simulate` as `request` asks: the protocol or history simulated and
+    written to `out`; the exit status."""
+    require_folder_of(request.out, "--out")
+    inputs = [("PROTOCOL.json|HISTORY.csv", request.input)]
+    if request.model.params:
+        inputs.append(("--params", request.model.params))
+    refuse_inputs([("--out", request.out)], inputs)
+    if request.input.lower().endswith(".json"):
+        return _simulate_protocol(request)
+    return _simulate_history(request)
