@@ -7,7 +7,7 @@ from .data import (
 )
 from .each import fit_each as fit_each
 from .exported import cached_fit_kernels as cached_fit_kernels
-from .fit import fit as fit, fit_tests as fit_tests
+from .fit import fit as fit
 from .loss import make_loss as make_loss
 from .parameters import declared_parameters as declared_parameters, field_at as field_at
 from .problem import (

@@ -363,17 +363,6 @@ def fit(
     )
 
 
-def fit_tests(model: AbstractCableModel, tests, **kwargs) -> FitResult:
-    """[`jaxcable.fit`][] with the fields of its `Problem` (`fit`, `per_test`,
-    `transforms`, `drive`, `covariate`) and of its `LeastSquares` (`solver`,
-    `max_steps`, `multistart`, `spread`, `key`) and `throw` as keywords, for the
-    modules of the package that do not build a `Problem` yet."""
-    fields = ("fit", "per_test", "transforms", "drive", "covariate")
-    problem = Problem(model, tests, **{k: kwargs.pop(k) for k in fields if k in kwargs})
-    throw = kwargs.pop("throw", True)
-    return fit(problem, LeastSquares(**kwargs), throw=throw)
-
-
 # The table of reparameterisations is derived from the models' declarations
 # (docstrings are None under `python -OO`).
 if fit.__doc__:

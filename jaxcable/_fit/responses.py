@@ -62,8 +62,9 @@ def responses(
     covariate: str | None = None,
 ) -> list[np.ndarray]:
     """[`jaxcable.model_responses`][] of `tests` by `drive` (None: the result's
-    drives, else `"auto"`) and `covariate`, for the modules of the package that do
-    not build a `Problem` yet."""
+    drives, else `"auto"`) and `covariate`: for the package's own callers, which
+    score held-out or training slices of tests without a model to make a `Problem`
+    of."""
     if drive is None:
         drives = getattr(result, "drives", ())
         drive = list(drives) if drives else "auto"
