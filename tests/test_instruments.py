@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import jaxcable as jc
-from jaxcable._cli.data import read_tests
+from jaxcable._cli.data import Reading, read_tests
 
 
 # time s, elongation mm, force N: the rows every layout below writes, in its units.
@@ -238,7 +238,9 @@ def test_caller_values_win_with_a_warning(tmp_path):
 
 def test_cli_prints_the_warning_as_one_line(tmp_path, capsys):
     path = _write(tmp_path, "bluehill.csv", _bluehill(), newline="\r\n")
-    options = dict(length_mm=20.0, detect_slack=False)
+    options = Reading(
+        metadata={"length_mm": 20.0}, options=jc.ReadOptions(detect_slack=False)
+    )
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # printed, not raised
         (data,) = read_tests([path], options, 1, jc.NoProgressMeter())
