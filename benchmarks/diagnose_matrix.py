@@ -6,7 +6,7 @@ levels, three temperatures; 5 um elongation and 0.05 N force noise; the base
 parameters perturbed by 10 % per seed) are diagnosed at the effect's documented size;
 the named causes make the confusion matrix (its `unexplained` column: an excess over
 the noise that no candidate explains enough to be named, see
-`jaxcable._diagnose.verdict`). With `--sweep`, each effect is also run at
+`jaxcable._diagnose.rule`). With `--sweep`, each effect is also run at
 its weaker sizes (`HIDDEN_EFFECTS[effect]["weaker"]`), and its detection limit is the
 weakest size named in >= 9 of 10 seeds. For every run the held-out RMSE of the named
 model is compared with the floor: the held-out RMSE of the data-generating model
@@ -44,8 +44,7 @@ jax.config.update("jax_enable_x64", True)
 
 import jaxcable as jc
 from jaxcable import papers
-from jaxcable._diagnose import heldout_rmse
-from jaxcable._diagnose.heldout import heldout_start
+from jaxcable._diagnose import heldout_rmse, heldout_start
 from jaxcable._papers.synthetic import (
     HIDDEN_EFFECT_DESIGN,
     HIDDEN_EFFECTS,
@@ -115,7 +114,7 @@ def run(effect, seed, size):
             papers.hidden_effect_model(effect, seed=seed, size=size), tests
         )
     rms_um, max_um = effect_magnitude(effect, seed, size)
-    d = jc.diagnose(tests)
+    d = jc.diagnose(jc.Problem(jc.IntegratedModel(), tests).with_scaled_start())
     gains = {c.id: c.gain_pct for c in d.candidates}
     base_um = 1e3 * d.base_heldout_rmse_mm
     true_gain = 100.0 * (1.0 - 1e3 * floor / base_um)

@@ -2,7 +2,7 @@
 `jaxcable.diagnose`.
 
 Two families of synthetic data sets (the six tests, protocol and noise of
-`jaxcable.papers.hidden_effect_dataset`), each diagnosed with `jaxcable.diagnose(tests)`
+`jaxcable.papers.hidden_effect_dataset`), each diagnosed with `jaxcable.diagnose(problem)`
 as a user would, seed by seed:
 
 - pairs of catalogue effects (`jaxcable.papers.HIDDEN_PAIRS`, `hidden_pair_dataset`):
@@ -109,7 +109,7 @@ def run_pair(job) -> dict:
     tests = papers.hidden_pair_dataset((a, b), seed=seed)
     floor_um = 1e3 * heldout_rmse(papers.hidden_pair_model((a, b), seed=seed), tests)
     start = time.perf_counter()
-    d = jc.diagnose(tests)
+    d = jc.diagnose(jc.Problem(jc.IntegratedModel(), tests).with_scaled_start())
     row = {"kind": "pair", "case": pair, "seed": seed, "floor_um": floor_um}
     row.update(_common(d, time.perf_counter() - start))
     causes = row["causes"]
@@ -133,7 +133,7 @@ def run_memory(job) -> dict:
     truth = papers.truth_elongations(effect, seed=seed, tests=tests)
     floor_um = _heldout_um(tests, truth)
     start = time.perf_counter()
-    d = jc.diagnose(tests)
+    d = jc.diagnose(jc.Problem(jc.IntegratedModel(), tests).with_scaled_start())
     row = {"kind": "memory", "case": effect, "seed": seed, "floor_um": floor_um}
     row.update(_common(d, time.perf_counter() - start))
     base = row["base_heldout_um"]

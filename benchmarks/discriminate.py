@@ -138,7 +138,10 @@ def main():
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             diagnosis = jc.diagnose(
-                tests, candidates=[TRUE, RIVAL], discover=False, max_rounds=1
+                jc.Problem(jc.IntegratedModel(), tests).with_scaled_start(),
+                jc.CandidateSearch(
+                    candidates=[TRUE, RIVAL], discover=False, max_rounds=1
+                ),
             )
         # The diagnosis fits its candidates to the first 70 % of every test; the
         # user refits both to every sample before designing (a fit on the

@@ -14,8 +14,11 @@ from ._cache import (
 from ._cpu_loops import enable_cpu_loop_kernels as enable_cpu_loop_kernels
 from ._diagnose import (
     Candidate as Candidate,
+    CandidateSearch as CandidateSearch,
     Diagnosis as Diagnosis,
+    Discovery as Discovery,
     DiscoveryResult as DiscoveryResult,
+    HeldOut as HeldOut,
     diagnose as diagnose,
     discover as discover,
     residual_structure as residual_structure,

@@ -10,7 +10,7 @@ summary; `--out FILE` writes the rows as JSON. `--jobs N` runs N processes.
 
 With `--pairs` (ids `a+b` of `jaxcable.papers.HIDDEN_PAIRS`, or `all`), each pair's
 data set (`hidden_pair_dataset`) is fitted by the base with ONE of its two effects
-(`diagnose(tests, candidates=[a], discover=False, max_rounds=1)`, the effect's
+(`diagnose(problem, CandidateSearch(candidates=[a], discover=False, max_rounds=1))`, the effect's
 parameters free with the base's), and that fit's held-out RMSE is compared with the
 floor (the true pair model driven by the recorded force): how clearly the effect
 left out stays visible beside the other.
@@ -32,7 +32,7 @@ import numpy as np
 
 def heldout_rms(tests, predictions) -> float:
     """Pooled RMSE over the held-out samples (`diagnose`'s time split), um."""
-    from jaxcable._diagnose.heldout import heldout_start
+    from jaxcable._diagnose import heldout_start
 
     sq, n = 0.0, 0
     for t, p in zip(tests, predictions):
@@ -45,10 +45,10 @@ def heldout_rms(tests, predictions) -> float:
 def _base_only(jc, tests):
     """The base fitted alone (no candidate, no discovery: only its held-out RMSE is
     used)."""
-    try:
-        return jc.diagnose(tests, candidates=[], discover=False, max_rounds=1)
-    except TypeError:  # a diagnose without rounds or the discovery switch
-        return jc.diagnose(tests, candidates=[])
+    search = jc.CandidateSearch(candidates=[], discover=False, max_rounds=1)
+    return jc.diagnose(
+        jc.Problem(jc.IntegratedModel(), tests).with_scaled_start(), search
+    )
 
 
 def run_pair(job):
@@ -68,7 +68,10 @@ def run_pair(job):
     row = {"pair": pair, "seed": seed, "floor_um": floor}
     row["base_um"] = 1e3 * _base_only(jc, tests).base_heldout_rmse_mm
     for kept, missed in ((a, b), (b, a)):
-        d = jc.diagnose(tests, candidates=[kept], discover=False, max_rounds=1)
+        search = jc.CandidateSearch(candidates=[kept], discover=False, max_rounds=1)
+        d = jc.diagnose(
+            jc.Problem(jc.IntegratedModel(), tests).with_scaled_start(), search
+        )
         (c,) = [c for c in d.candidates if c.id == kept]
         row[f"with_{kept}_um"] = 1e3 * c.heldout_rmse_mm
         row[f"{missed}_excess"] = row[f"with_{kept}_um"] / floor

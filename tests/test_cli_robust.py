@@ -316,7 +316,7 @@ def test_replaced_output_said_and_written_atomically(tmp_path, capsys, monkeypat
 def test_library_writers_are_atomic(tmp_path, monkeypatch):
     # FitResult.to_json and Diagnosis.to_json write through the atomic writer: a
     # failed write leaves the old file as it was.
-    from jaxcable._diagnose import result as diagnose_result
+    from jaxcable._diagnose import diagnosis as diagnose_result
     from jaxcable._fit import result as fit_result
 
     assert fit_result.write_text_atomic is diagnose_result.write_text_atomic

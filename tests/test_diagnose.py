@@ -26,36 +26,50 @@ def clean_tests():
 
 
 @pytest.mark.parametrize(
-    "kwargs, match",
+    "make, match",
     [
-        ({"candidates": ["creep_rupture"]}, "candidates"),
-        ({"split": "random"}, "split"),
-        ({"holdout": 0.0}, "holdout"),
-        ({"holdout": 0.95}, "holdout"),
-        ({"model": "integrated"}, "model"),
-        ({"progress_meter": True}, "progress_meter"),
-        ({"fit_names": []}, "fit_names"),
+        (lambda: jc.CandidateSearch(candidates=["creep_rupture"]), "candidates"),
+        (lambda: jc.CandidateSearch(max_rounds=0), "max_rounds"),
+        (lambda: jc.CandidateSearch(family="yes"), "family"),
+        (lambda: jc.CandidateSearch(discover=1), "discover"),
+        (lambda: jc.CandidateSearch(heldout=0.3), "heldout"),
+        (lambda: jc.CandidateSearch(least_squares=None), "least_squares"),
+        (lambda: jc.HeldOut(split="random"), "split"),
+        (lambda: jc.HeldOut(fraction=0.0), "fraction"),
+        (lambda: jc.HeldOut(fraction=0.95), "fraction"),
+        (lambda: jc.HeldOut(split="tests", folds=1), "folds"),
     ],
 )
-def test_bad_arguments_name_the_argument(clean_tests, kwargs, match):
+def test_bad_methods_name_the_field(make, match):
     with pytest.raises(ValueError, match=match):
-        jc.diagnose(clean_tests, **kwargs)
+        make()
+
+
+def test_bad_arguments_name_the_argument(clean_tests):
+    problem = jc.Problem(jc.IntegratedModel(), clean_tests)
+    with pytest.raises(TypeError, match="problem"):
+        jc.diagnose(clean_tests)
+    with pytest.raises(TypeError, match="method"):
+        jc.diagnose(problem, jc.LeastSquares())
+    with pytest.raises(ValueError, match="progress_meter"):
+        jc.diagnose(problem, progress_meter=True)
+    with pytest.raises(ValueError, match="fit"):
+        jc.diagnose(jc.Problem(jc.IntegratedModel(), clean_tests, fit=[]))
+    with pytest.raises(ValueError, match="per_test"):
+        jc.diagnose(jc.Problem(jc.IntegratedModel(), clean_tests, per_test=["E1"]))
 
 
 def test_leave_one_out_needs_two_tests(clean_tests):
+    problem = jc.Problem(jc.IntegratedModel(), clean_tests[:1])
     with pytest.raises(ValueError, match="split"):
-        jc.diagnose(clean_tests[:1], split="tests")
+        jc.diagnose(problem, jc.CandidateSearch(heldout=jc.HeldOut(split="tests")))
 
 
 def test_test_without_elongation_is_rejected(clean_tests):
     bad = dataclasses.replace(clean_tests[0], elongation=None)
+    problem = jc.Problem(jc.IntegratedModel(), [bad, *clean_tests[1:]])
     with pytest.raises(ValueError, match=r"tests\[0\]"):
-        jc.diagnose([bad, *clean_tests[1:]])
-
-
-def test_no_tests_is_rejected():
-    with pytest.raises(ValueError, match="tests"):
-        jc.diagnose([])
+        jc.diagnose(problem)
 
 
 # ----------------------------------------------------------------------------------
@@ -102,7 +116,8 @@ def test_temperature_candidate_is_not_applicable_at_one_temperature(clean_tests)
     ]
     for t in one:
         t.metadata["temperature_C"] = 21.0
-    d = jc.diagnose(one, candidates=["temperature"])
+    problem = jc.Problem(jc.IntegratedModel(), one).with_scaled_start()
+    d = jc.diagnose(problem, jc.CandidateSearch(candidates=["temperature"]))
     c = d.candidate("temperature")
     assert not c.applicable and "K" in c.note
     assert d.named_cause == "none"
@@ -130,7 +145,7 @@ def test_hidden_effect_is_named(effect):
     # where 9 of 10 seeds are named; here one seed must be).
     size = None if effect is None else _synthetic.HIDDEN_EFFECTS[effect]["test"]
     tests = _synthetic.hidden_effect_dataset(effect, seed=seed, size=size)
-    d = jc.diagnose(tests)
+    d = jc.diagnose(jc.Problem(jc.IntegratedModel(), tests).with_scaled_start())
     assert d.named_cause == (effect or "none"), d.summary()
     # The named model predicts the held-out data to within 20 % of the noise level:
     # the held-out RMSE of the data-generating model itself (the 5 um elongation
@@ -224,14 +239,15 @@ def test_other_base_models_refit_all_their_parameters(clean_tests):
         for t in clean_tests[:3]
     ]
     d = jc.diagnose(
-        unbreakable,
-        jc.BurgersModel(),
-        candidates=["hereditary", "termination_compliance"],
-        # The point is which parameters are fitted: one round, no discovery, and
-        # no other family (these data want the integrated model's).
-        discover=False,
-        max_rounds=1,
-        family=False,
+        jc.Problem(jc.BurgersModel(), unbreakable),
+        jc.CandidateSearch(
+            candidates=["hereditary", "termination_compliance"],
+            # The point is which parameters are fitted: one round, no discovery,
+            # and no other family (these data want the integrated model's).
+            discover=False,
+            max_rounds=1,
+            family=False,
+        ),
     )
     assert set(d.base_fit.names) == {"E1", "eta0", "E2", "eta2"}
     here = d.candidate("hereditary")

@@ -104,7 +104,7 @@ def test_displacement_controlled_diagnosis_names_nothing_in_newtons(
     base predicts the held-out force to within the noise, no cause is named, and
     every score is in N."""
     tests = displacement_tests
-    d = jc.diagnose(tests, START, candidates=CANDIDATES)
+    d = jc.diagnose(jc.Problem(START, tests), jc.CandidateSearch(candidates=CANDIDATES))
     assert _names(d.drives) == ("elongation",) * 3
     assert _names(d.base_fit.drives) == ("elongation",) * 3
     assert d.unit == "N"
@@ -142,18 +142,17 @@ def test_drives_are_fixed_once_for_every_fold(displacement_tests):
         for t in displacement_tests
     ]
     d = jc.diagnose(
-        untagged,
-        START,
-        candidates=["termination_compliance"],
-        split="tests",
-        drive="elongation",
+        jc.Problem(START, untagged, drive="elongation"),
+        jc.CandidateSearch(
+            candidates=["termination_compliance"], heldout=jc.HeldOut(split="tests")
+        ),
     )
     assert d.unit == "N" and _names(d.drives) == ("elongation",) * 3
     assert _names(d.base_fit.drives) == ("elongation",) * 2
     fit = d.candidate("termination_compliance").fit
     assert _names(fit.drives) == ("elongation",) * 2
     with pytest.raises(ValueError, match="drive"):
-        jc.diagnose(untagged, START, drive=["force", "elongation"])
+        jc.diagnose(jc.Problem(START, untagged, drive=["force", "elongation"]))
 
 
 def test_mixed_drives_are_scored_in_noise_units():
@@ -162,7 +161,7 @@ def test_mixed_drives_are_scored_in_noise_units():
     it names nothing."""
     tests = [creep(500.0, 10), creep(1000.0, 11), relaxation(0.01, 12)]
     tests.append(relaxation(0.02, 13))
-    d = jc.diagnose(tests, START, candidates=CANDIDATES)
+    d = jc.diagnose(jc.Problem(START, tests), jc.CandidateSearch(candidates=CANDIDATES))
     assert _names(d.drives) == ("force", "force", "elongation", "elongation")
     assert d.unit == "noise"
     assert d.named_cause == "none", d.summary()

@@ -99,14 +99,14 @@ def hidden():
 
 
 def _train(tests, holdout=0.3):
-    from jaxcable._diagnose.heldout import time_split
+    from jaxcable._diagnose import time_split
 
     return time_split(tests, holdout)[0]
 
 
 def test_discover_finds_a_hidden_mechano_sorptive_term(hidden):
     true, tests, base_fit = hidden
-    found = jc.discover(base_fit, tests, covariate="humidity")
+    found = jc.discover(base_fit, jc.Problem(BASE, tests, covariate="humidity"))
     assert found.terms[0] == TERM, found.path
     k = found.terms.index(TERM)
     assert abs(found.values[k] - THETA) <= 3 * found.stderr[k], found.equation
@@ -133,7 +133,7 @@ def test_discover_finds_nothing_in_noise():
     tests = _tests(BASE)
     problem = jc.Problem(BASE, _train(tests), fit=BASE_FIT, drive="force")
     base_fit = jc.fit(problem, jc.LeastSquares(multistart=1))
-    found = jc.discover(base_fit, tests, covariate="humidity")
+    found = jc.discover(base_fit, jc.Problem(BASE, tests, covariate="humidity"))
     assert found.terms == () or abs(found.gain_pct) < 5, found.path
     assert found.fit is None or found.gain_pct < 5
 
@@ -144,7 +144,8 @@ def test_diagnosis_discovers_the_term_the_catalogue_lacks(hidden):
     true = hidden[0]
     # Dense enough (600 samples) for the noise estimate of second differences.
     tests = _tests(true, samples=600)
-    d = jc.diagnose(tests, BASE, fit_names=BASE_FIT, candidates=[], drive="force")
+    problem = jc.Problem(BASE, tests, fit=BASE_FIT, drive="force")
+    d = jc.diagnose(problem, jc.CandidateSearch(candidates=[]))
     assert d.named_cause == "discovered", d.summary()
     assert d.verdict == "named"
     assert d.discovered["covariate"] == "humidity"
@@ -164,7 +165,7 @@ def test_discover_finds_cyclic_softening_without_a_covariate():
     tests = _tests(true, covariate=False)
     problem = jc.Problem(BASE, _train(tests), fit=BASE_FIT, drive="force")
     base_fit = jc.fit(problem, jc.LeastSquares(multistart=1))
-    found = jc.discover(base_fit, tests)
+    found = jc.discover(base_fit, jc.Problem(BASE, tests))
     assert "sigma_cycles_rate" in found.terms, found.path
     k = found.terms.index("sigma_cycles_rate")
     assert abs(found.values[k] - theta) <= 3 * found.stderr[k], found.equation
@@ -179,12 +180,8 @@ def test_diagnosis_names_the_covariate_form_and_its_column(hidden):
     true = hidden[0]
     tests = _tests(true, samples=600)
     d = jc.diagnose(
-        tests,
-        BASE,
-        fit_names=BASE_FIT,
-        candidates=list(jc.COVARIATE_EXTENSIONS),
-        drive="force",
-        discover=False,
+        jc.Problem(BASE, tests, fit=BASE_FIT, drive="force"),
+        jc.CandidateSearch(candidates=list(jc.COVARIATE_EXTENSIONS), discover=False),
     )
     assert d.named_cause == "mechano_sorptive[humidity]", d.summary()
     named = next(c for c in d.candidates if c.id == d.named_cause)
@@ -197,12 +194,8 @@ def test_diagnosis_names_the_covariate_form_and_its_column(hidden):
         jc.TestData(t.time, t.force, t.elongation, metadata=t.metadata) for t in tests
     ]
     d = jc.diagnose(
-        bare,
-        BASE,
-        fit_names=BASE_FIT,
-        candidates=["mechano_sorptive"],
-        drive="force",
-        discover=False,
+        jc.Problem(BASE, bare, fit=BASE_FIT, drive="force"),
+        jc.CandidateSearch(candidates=["mechano_sorptive"], discover=False),
     )
     assert len(d.candidates) == 0 and "mechano" not in d.named_cause
 
@@ -213,7 +206,7 @@ def test_discover_finds_a_damage_that_runs_away():
     cycling Burgers cable (no covariate): the discovery finds that damage with an
     acceleration well above 0 (the run-away, not a damage linear in I), and it
     predicts the held-out samples."""
-    from jaxcable._diagnose.library import damage_integral, step_inputs
+    from jaxcable._diagnose import damage_integral, step_inputs
 
     def largest(tests):
         return max(
@@ -229,7 +222,7 @@ def test_discover_finds_a_damage_that_runs_away():
     tests = _tests(true, covariate=False)
     problem = jc.Problem(BASE, _train(tests), fit=BASE_FIT, drive="force")
     base_fit = jc.fit(problem, jc.LeastSquares(multistart=1))
-    found = jc.discover(base_fit, tests)
+    found = jc.discover(base_fit, jc.Problem(BASE, tests))
     assert "compliance_cycles" in found.terms, found.path
     k = found.terms.index("compliance_cycles")
     assert found.accels[k] * largest(tests) >= 0.3, found.equation

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import jaxcable as jc
-from jaxcable._diagnose.family import FAMILY_EXCESS
+from jaxcable._diagnose import FAMILY_EXCESS
 from jaxcable._papers import synthetic as _synthetic
 
 
@@ -99,14 +99,18 @@ _FINDLEY_TRUTH = jc.FindleyModel(E0=2.5e9, E_t=4e9, n=0.35)
 @pytest.fixture(scope="module")
 def power_law():
     """The default (integrated) base on a power-law creep."""
-    return jc.diagnose(_tests(_FINDLEY_TRUTH), candidates=[], max_rounds=1)
+    tests = _tests(_FINDLEY_TRUTH)
+    problem = jc.Problem(jc.IntegratedModel(), tests).with_scaled_start()
+    return jc.diagnose(problem, jc.CandidateSearch(candidates=[], max_rounds=1))
 
 
 @pytest.fixture(scope="module")
 def own_family():
     """The integrated base on its own data, every family compared (asked for)."""
     truth = _synthetic.hidden_effect_model(None, seed=5)
-    return jc.diagnose(_tests(truth), candidates=[], max_rounds=1, family=True)
+    problem = jc.Problem(jc.IntegratedModel(), _tests(truth)).with_scaled_start()
+    search = jc.CandidateSearch(candidates=[], max_rounds=1, family=True)
+    return jc.diagnose(problem, search)
 
 
 def test_power_law_data_want_the_power_law(power_law):

@@ -96,7 +96,8 @@ def test_fit_runs_at_the_true_diameter(plain):
 
 
 def test_diagnose_names_a_hidden_hardening(hardened):
-    d = jc.diagnose(hardened, max_rounds=1, discover=False)
+    problem = jc.Problem(jc.IntegratedModel(), hardened).with_scaled_start()
+    d = jc.diagnose(problem, jc.CandidateSearch(max_rounds=1, discover=False))
     assert d.named_cause == "hardening"
     assert d.final_heldout_rmse_mm < 1.5 * d.noise_mm
     fit = d.candidate("hardening").fit
@@ -105,6 +106,7 @@ def test_diagnose_names_a_hidden_hardening(hardened):
 
 
 def test_diagnose_does_not_name_hardening_without_it(plain):
-    d = jc.diagnose(plain, max_rounds=1, discover=False)
+    problem = jc.Problem(jc.IntegratedModel(), plain).with_scaled_start()
+    d = jc.diagnose(problem, jc.CandidateSearch(max_rounds=1, discover=False))
     assert d.named_cause != "hardening"
     assert not d.candidate("hardening").significant

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import jaxcable as jc
-from jaxcable._diagnose.noise import channel_noise, grid_step, white_part
+from jaxcable._diagnose import channel_noise, grid_step, white_part
 from jaxcable._papers.synthetic import hidden_effect_model
 
 from .helpers import creep_recovery_protocol
@@ -64,7 +64,9 @@ def _records(sigma: float, smoothing: float = 0.0):
 
 def _diagnosis(tests):
     """The base alone (no candidate): its noise estimate."""
-    return jc.diagnose(tests, candidates=[], max_rounds=1, discover=False)
+    problem = jc.Problem(jc.IntegratedModel(), tests).with_scaled_start()
+    search = jc.CandidateSearch(candidates=[], max_rounds=1, discover=False)
+    return jc.diagnose(problem, search)
 
 
 @pytest.fixture(scope="module")

@@ -14,11 +14,11 @@ from jaxcable import papers
 from jaxcable._diagnose import (
     Candidate,
     Diagnosis,
+    diverges,
     explained_pct,
     explained_rmse_pct,
+    memory_library,
 )
-from jaxcable._diagnose.library import memory_library
-from jaxcable._diagnose.verdict import diverges
 from jaxcable._fit.serialize import model_document, model_from_document
 
 
@@ -57,7 +57,10 @@ def _two_causes(seed=3):
 @functools.cache
 def _diagnosed():
     tests = _two_causes()
-    return tests, jc.diagnose(tests, candidates=CANDIDATES)
+    return tests, jc.diagnose(
+        jc.Problem(jc.IntegratedModel(), tests).with_scaled_start(),
+        jc.CandidateSearch(candidates=CANDIDATES),
+    )
 
 
 @pytest.fixture
@@ -103,7 +106,10 @@ def test_the_report_shows_every_round(two_causes, tmp_path):
 def test_one_round_stops_after_the_first_cause(two_causes):
     tests, d = two_causes
     # Without the discovery, which a round after the first would not reach either.
-    one = jc.diagnose(tests, candidates=CANDIDATES, max_rounds=1, discover=False)
+    one = jc.diagnose(
+        jc.Problem(jc.IntegratedModel(), tests).with_scaled_start(),
+        jc.CandidateSearch(candidates=CANDIDATES, max_rounds=1, discover=False),
+    )
     # One round: no second look, so the second cause is not found (the first is
     # named only when sufficient alone; a partial one needs a next round).
     assert not one.rounds and len(one.causes) <= 1
@@ -114,7 +120,7 @@ def test_one_round_stops_after_the_first_cause(two_causes):
 @pytest.mark.parametrize("bad", [0, -1, 1.5, True, "2"])
 def test_bad_max_rounds(bad):
     with pytest.raises(ValueError, match="max_rounds"):
-        jc.diagnose(_two_causes()[:1], max_rounds=bad)
+        jc.CandidateSearch(max_rounds=bad)
 
 
 def test_share_on_rmse_and_on_squares():
@@ -260,11 +266,21 @@ def test_memory_terms_round_trip_through_params_json():
 def test_a_residual_beside_an_unused_or_memoryless_covariate_asks_for_the_discovery():
     from types import SimpleNamespace as S
 
-    from jaxcable._diagnose.rounds import _discovery_may_beat, _named_unless_beaten
-    from jaxcable._diagnose.verdict import Verdict
+    from jaxcable._diagnose import Verdict
+    from jaxcable._diagnose.stages import (
+        _discovery_may_beat as may_beat,
+        _named_unless_beaten,
+    )
 
     plan, base = S(columns=("humidity_pct",)), S(covariate=None)
     named = Verdict("named", 0, (90.0,))
+
+    def _discovery_may_beat(plan, base, found, decision, noise):
+        # The round's state as the stage reads it.
+        round_base = S(problem=S(covariate=base.covariate))
+        return may_beat(
+            S(plan=plan, base=round_base, found=found, decision=decision, noise=noise)
+        )
 
     def found(rmse, covariate=None):
         return (S(heldout_rmse=rmse, covariate=covariate),)

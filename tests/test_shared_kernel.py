@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import jaxcable as jc
-from jaxcable._diagnose.stack import stack_of
+from jaxcable._diagnose import stack_of
 from jaxcable._fit import fit_subset, shared_layout, solver as _solver
 from jaxcable._papers import synthetic as _synthetic
 
@@ -109,7 +109,7 @@ def test_a_diagnosis_traces_the_fit_kernel_at_most_once(monkeypatch):
 
     monkeypatch.setattr(_solver, "_data_derived_start", counting)
     data = _synthetic.hidden_effect_dataset("termination_compliance", seed=5)
-    d = jc.diagnose(data)
+    d = jc.diagnose(jc.Problem(jc.IntegratedModel(), data).with_scaled_start())
     assert len([c for c in d.candidates if c.applicable]) >= 5
     assert len(traces) <= 1, f"the fit kernel was traced {len(traces)} times"
 

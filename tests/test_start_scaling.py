@@ -74,11 +74,10 @@ def test_a_start_beyond_break_is_moved_by_diagnose(stiff_joint):
     )
     with pytest.warns(jc.StartMovedWarning, match="scaled to the data"):
         d = jc.diagnose(
-            stiff_joint,
-            jc.BurgersModel(),
-            candidates=["termination_compliance"],
-            discover=False,
-            max_rounds=1,
+            jc.Problem(jc.BurgersModel(), stiff_joint),
+            jc.CandidateSearch(
+                candidates=["termination_compliance"], discover=False, max_rounds=1
+            ),
         )
     assert d.verdict in ("none", "named", "unexplained")
     # The moved start fits: the base's held-out RMSE within 2 x the noise (2 um).

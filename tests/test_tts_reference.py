@@ -62,11 +62,13 @@ def case(request):
     # Three starts: from one, the base's own fit (no shift, tests 16 K apart)
     # stops in a shallow valley on this data.
     d = jc.diagnose(
-        tests,
-        candidates=["temperature", "stress_nonlinear_creep"],
-        max_rounds=1,
-        discover=False,
-        multistart=3,
+        jc.Problem(jc.IntegratedModel(), tests).with_scaled_start(),
+        jc.CandidateSearch(
+            candidates=["temperature", "stress_nonlinear_creep"],
+            max_rounds=1,
+            discover=False,
+            least_squares=jc.LeastSquares(multistart=3),
+        ),
     )
     return request.param, truth, tests, d
 

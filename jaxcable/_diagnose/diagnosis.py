@@ -1,6 +1,5 @@
-"""The result of a diagnosis: the scored candidate extensions (`Candidate`), the
-decision (`Diagnosis`) with its JSON and plain-text forms, and the thresholds that
-decide significance."""
+"""What a diagnosis gives: the scored candidate extensions (`Candidate`) and the
+decision (`Diagnosis`) with its JSON and plain-text forms."""
 
 import dataclasses
 import json
@@ -11,17 +10,8 @@ from .._drive import AbstractTestDrive, as_test_drive
 from .._files import write_text_atomic
 from .._fit import FitResult
 from .._json import jsonable
-from .text import summary
-from .verdict import (
-    MAX_DELTA_BIC,
-    MAX_DIVERGENCE,
-    MAX_FLOOR_RATIO,
-    MIN_AUTOCORRELATION,
-    MIN_EXCESS,
-    MIN_EXPLAINED_PCT,
-    MIN_GAIN_PCT,
-    MIN_SIZE_Z,
-)
+from .rule import thresholds
+from .summary import summary
 
 
 if TYPE_CHECKING:
@@ -317,16 +307,7 @@ class Diagnosis:
             "noise_source": self.noise_source,
             "drives": [as_test_drive(d).name for d in self.drives],
             "split": self.split,
-            "thresholds": {
-                "min_gain_pct": MIN_GAIN_PCT,
-                "max_delta_bic": MAX_DELTA_BIC,
-                "min_size_z": MIN_SIZE_Z,
-                "min_excess_over_noise": MIN_EXCESS,
-                "max_heldout_over_noise": MAX_FLOOR_RATIO,
-                "min_explained_pct": MIN_EXPLAINED_PCT,
-                "min_autocorrelation_unexplained": MIN_AUTOCORRELATION,
-                "max_divergence": MAX_DIVERGENCE,
-            },
+            "thresholds": thresholds(),
             "causes": list(self.causes),
             "cause_gains_pct": [jsonable(g) for g in self.cause_gains],
             "final_heldout_rmse": jsonable(self.final_heldout_rmse),

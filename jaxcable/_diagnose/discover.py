@@ -12,20 +12,14 @@ covariate, which an elongation-driven test does not prescribe.
 
 import dataclasses
 import math
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
 from .._drive import FORCE_DRIVEN, as_test_drive
-from .._fit import (
-    FitResult,
-    as_test_list,
-    fit,
-    model_responses,
-    test_id,
-)
+from .._fit import FitResult, responses, test_id
 from .._models import AbstractCableModel
-from .heldout import heldout_start
+from .._problem import Problem
 from .library import (
     ACCEL_FIELDS,
     COVARIATE_TERMS,
@@ -49,13 +43,8 @@ from .library import (
     step_inputs,
     theta_unit,
 )
+from .methods import Discovery, check_arguments, fit_quietly, heldout_start
 from .scoring import force_scoring
-
-
-# A support is kept only when its held-out RMSE of the residual is this share below
-# that of no term (percent): on noise alone, a term fitted to the training samples
-# predicts the held-out ones by chance by at most a few percent.
-MIN_GAIN_PCT = 5.0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -154,23 +143,20 @@ def _equation(terms, values, stderr, covariate, rates, accels) -> str:
 
 
 def discover(
-    base_fit: FitResult,
-    tests,
-    *,
-    covariate: str | None = None,
-    holdout: float = 0.3,
-    held=None,
-    terms=None,
-    min_gain_pct: float = MIN_GAIN_PCT,
-    joint_fit: bool = True,
-    **fit_kwargs,
+    base_fit: FitResult, problem: Problem, method: Discovery = Discovery()
 ) -> DiscoveryResult:
     """Find at most four library terms whose integrated strain explains the residual
     of a fitted base model, and fit them jointly with the base.
 
+    ```python
+    base_fit = jc.fit(problem)  # on the training samples, for an honest score
+    found = jc.discover(base_fit, problem)
+    print(found.equation)
+    ```
+
     1. The residual strain r = (measured - model) / L0 of `base_fit`'s model along
         every force-driven test; each library term's strain per unit theta eps_k
-        (see [`library`][]); and the sensitivity of the model's strain to each of
+        (see `library`); and the sensitivity of the model's strain to each of
         the base's fitted parameters (its Jacobian at the fit).
     2. Forward selection of at most four terms: each support is the least-squares
         fit of r on its terms' strains AND every base sensitivity over the training
@@ -178,28 +164,24 @@ def discover(
         term the base can mimic by refitting is not chosen), scored by the RMSE of
         what it leaves on the held-out samples.
     3. The support of least held-out RMSE is chosen if it beats no term (the base
-        refitted to first order) by `min_gain_pct` (else none), and of near-equal
-        ones (within 1 %) the fewest terms.
+        refitted to first order) by `method.min_gain_pct` (else none), and of
+        near-equal ones (within 1 %) the fewest terms.
     4. `DiscoveredTerm(base, theta, terms)` is fitted by [`jaxcable.fit`][]
-        (`drive="force"`, the base's fitted parameters and the chosen thetas) on the
+        (force-driven, the base's fitted parameters and the chosen thetas) on the
         training samples, and scored on the held-out ones.
 
     **Arguments:**
 
     - `base_fit`: a [`jaxcable.FitResult`][] of the base model (on the training
         samples of these tests, for an honest held-out score).
-    - `tests`: the tests ([`jaxcable.TestData`][]); only force-driven ones are
-        used (a test not force-driven in `base_fit` is skipped).
-    - `covariate`: an extra column present in every test (its unit is the
-        column's), or None: no covariate terms.
-    - `holdout`: the held-out fraction at the end of every test (the diagnosis's
-        time split), unless `held` is given.
-    - `held`: one boolean array per test, True where a sample is held out.
-    - `terms`: the library to search (default all of `TERMS`, less the covariate
-        terms without a covariate).
-    - `min_gain_pct`: the held-out gain over no term a support needs, percent.
-    - `joint_fit`: fit the chosen terms with the base (default True).
-    - `fit_kwargs`: passed on to [`jaxcable.fit`][] (e.g. `multistart`).
+    - `problem`: a [`jaxcable.Problem`][] whose `tests` are searched (only the
+        force-driven ones: a test not force-driven in `base_fit` is skipped) with
+        its `covariate` (an extra column every test records, its unit the
+        column's; None: no covariate terms). Its model and fitted names are not
+        read: the base is `base_fit`'s.
+    - `method`: a [`jaxcable.Discovery`][] (default `jc.Discovery()`: every term,
+        the last 30 % of every test held out, a 5 % gain, a joint fit from one
+        start).
 
     **Returns:**
 
@@ -207,11 +189,80 @@ def discover(
 
     **Raises:**
 
-    `ValueError` when no test is force-driven, a `terms` id is unknown, or the
-    covariate column is missing (naming the test).
+    `TypeError` naming `problem` or `method` of another type; `ValueError` when no
+    test is force-driven or the covariate column is missing (naming the test).
     """
-    tests = as_test_list(tests)
-    drives = getattr(base_fit, "drives", ()) or (FORCE_DRIVEN,) * len(tests)
+    check_arguments(problem, method, Discovery)
+    return discover_terms(
+        base_fit, list(problem.tests), problem.covariate, None, method
+    )
+
+
+def discover_terms(
+    base_fit: FitResult, tests: list, covariate: str | None, held, method: Discovery
+) -> DiscoveryResult:
+    """[`discover`][] of `tests` with the extra column `covariate` (or none), held
+    out: `held` (one boolean array per test, True where a sample is held out), else
+    the last `method.heldout.fraction` of every test."""
+    keep, tests, held = _force_driven(base_fit, tests, held, covariate, method)
+    columns = _columns(tests, covariate, method.terms)
+    base = base_start(base_fit)
+    rows, train_tests = _rows(base, base_fit, tests, held, covariate, columns)
+    regression = _Regression(rows, len(columns.labels))
+    path, best = _select(regression, columns, method.min_gain_pct)
+    index = [columns.labels.index(label) for label in best]
+    chosen = tuple(columns.kind[i] for i in index)
+    coefficients = np.array([path[best][0][i] for i in index])
+    rates = np.array([columns.rate_of[i] for i in index])
+    accels = np.array([columns.accel_of[i] for i in index])
+    thetas = dict(zip(THETA_FIELDS, coefficients))
+    thetas.update(
+        {RATE_FIELDS[k]: r for k, r in enumerate(rates) if chosen[k] in MEMORY_TERMS}
+    )
+    thetas.update({ACCEL_FIELDS[k]: a for k, a in enumerate(accels) if a > 0})
+    model = DiscoveredTerm(base, terms=chosen, **thetas) if chosen else base
+    result, values = None, coefficients
+    stderr = np.full(len(chosen), np.nan)
+    if chosen and method.joint_fit:
+        result = fit_quietly(
+            Problem(
+                model,
+                train_tests,
+                fit=[*base_fit_names(base_fit)[0], *model.used_fields()],
+                per_test=base_fit_names(base_fit)[1],
+                drive=FORCE_DRIVEN.name,
+                covariate=covariate,
+            ),
+            method.least_squares,
+        )
+        model, values, stderr, rates, accels = _fitted_terms(result, chosen)
+    how = force_scoring(tests, covariate)
+    base_rmse = how.rmse(base, tests, range(len(tests)), held)
+    rmse = how.rmse(model, tests, range(len(tests)), held) if chosen else base_rmse
+    return DiscoveryResult(
+        terms=chosen,
+        coefficients=coefficients,
+        model=model,
+        fit=result,
+        values=values,
+        stderr=stderr,
+        units=tuple(theta_unit(t, f"[{covariate or 'c'}]") for t in chosen),
+        equation=_equation(chosen, values, stderr, covariate, rates, accels),
+        rates=rates,
+        accels=accels,
+        support=tuple(best),
+        covariate=covariate,
+        heldout_rmse_mm=(base_rmse, rmse),
+        gain_pct=100.0 * (1.0 - rmse / base_rmse) if base_rmse > 0 else 0.0,
+        path=tuple((s, v[1]) for s, v in path.items()),
+    )
+
+
+def _force_driven(base_fit: FitResult, tests: list, held, covariate, method):
+    """`(positions, tests, held)` of the force-driven tests of `base_fit`: the
+    discovery's tests and their held-out samples (`held`, else the time split of
+    `method.heldout`)."""
+    drives = base_fit.drives or (FORCE_DRIVEN,) * len(tests)
     keep = [i for i, d in enumerate(drives) if as_test_drive(d) == FORCE_DRIVEN]
     if not keep:
         raise ValueError(
@@ -219,18 +270,40 @@ def discover(
         )
     tests = [tests[i] for i in keep]
     if held is None:
+        fraction = method.heldout.fraction
         held = [
-            np.arange(len(t.time)) >= heldout_start(len(t.time), holdout) for t in tests
+            np.arange(len(t.time)) >= heldout_start(len(t.time), fraction)
+            for t in tests
         ]
     else:
         held = [np.asarray(held[i], bool) for i in keep]
     if covariate is not None:
         for i, t in zip(keep, tests):
-            if covariate not in (getattr(t, "extra", None) or {}):
+            if covariate not in (t.extra or {}):
                 raise ValueError(
                     f"`tests[{i}]` ({test_id(t, i)}) has no column {covariate!r} "
                     "(the `covariate`)."
                 )
+    return keep, tests, held
+
+
+class _Columns(NamedTuple):
+    """The regression's columns: the stateless terms `names`, then each term with
+    memory at every rate (and acceleration) of its grid (`keys`); `labels` as in
+    the path, `kind` the term of each column, `rate_of` and `accel_of` its rate and
+    acceleration (NaN for the stateless ones)."""
+
+    names: tuple[str, ...]
+    keys: list[tuple[str, float, float]]
+    labels: tuple[str, ...]
+    kind: list[str]
+    rate_of: list[float]
+    accel_of: list[float]
+
+
+def _columns(tests: list, covariate: str | None, terms) -> _Columns:
+    """The regression's [`_Columns`][] for `terms` (default: the whole library,
+    less the covariate terms without a covariate)."""
     wanted = (
         tuple(terms)
         if terms is not None
@@ -240,11 +313,6 @@ def discover(
             if covariate is not None or t not in COVARIATE_TERMS
         )
     )
-    unknown = [t for t in wanted if t not in TERMS and t not in MEMORY_TERMS]
-    if unknown:
-        raise ValueError(
-            f"`terms` {unknown} are not in the library {[*TERMS, *MEMORY_TERMS]}."
-        )
     names = tuple(t for t in wanted if t in TERMS)
     # Each term with memory enters the regression at every rate of its grid (a
     # column per rate; a support holds one rate of a term); the joint fit refines it.
@@ -275,142 +343,118 @@ def discover(
     labels = names + tuple(
         f"{t}@{r:.3g}" + (f",a={a:.3g}" if a else "") for t, r, a in keys
     )
-    kind = [*names, *(t for t, _, _ in keys)]
-    rate_of = [math.nan] * len(names) + [r for _, r, _ in keys]
-    accel_of = [math.nan] * len(names) + [a for _, _, a in keys]
-
-    base = base_start(base_fit)
-    shared, per = base_fit_names(base_fit)
-    sensitivity = sensitivities(base, base_fit, tests, covariate)
-    response = model_responses(
-        base, tests, drive=FORCE_DRIVEN.name, covariate=covariate
+    return _Columns(
+        names,
+        keys,
+        labels,
+        [*names, *(t for t, _, _ in keys)],
+        [math.nan] * len(names) + [r for _, r, _ in keys],
+        [math.nan] * len(names) + [a for _, _, a in keys],
     )
+
+
+def _rows(base, base_fit, tests, held, covariate, columns: _Columns):
+    """`(rows, train_tests)`: per test, the residual strain, the columns' strains,
+    the base's sensitivities (strain), the training and held-out samples and the
+    length; and the tests as the joint fit takes them (its training samples those of
+    its own mask not held out)."""
+    sensitivity = sensitivities(base, base_fit, tests, covariate)
+    response = responses(base, tests, FORCE_DRIVEN.name, covariate)
     rows, train_tests = [], []
     for t, m, h, sens in zip(tests, response, held, sensitivity):
         length = float(t.cable().length)
         measured = np.asarray(t.elongation, float)
-        own = getattr(t, "mask", None)
-        own = np.ones(len(m), bool) if own is None else np.asarray(own, bool)
+        own = np.ones(len(m), bool) if t.mask is None else np.asarray(t.mask, bool)
         valid = own & np.isfinite(measured) & np.isfinite(m)
         r = np.where(valid, (measured - m) / length, 0.0)
-        lib = library(t, covariate, names)
-        lib_memory = memory_library(t, covariate, m / length, keys)
+        lib = library(t, covariate, columns.names)
+        lib_memory = memory_library(t, covariate, m / length, columns.keys)
         cum = np.stack(
-            [lib[k] for k in names] + [lib_memory[k] for k in keys], axis=1
-        ).reshape(len(m), len(labels))
+            [lib[k] for k in columns.names] + [lib_memory[k] for k in columns.keys],
+            axis=1,
+        ).reshape(len(m), len(columns.labels))
         rows.append((r, cum, sens / length, valid & ~h, valid & h, length))
-        # The training samples of the joint fit: those of its own mask not held out.
         train_tests.append(dataclasses.replace(t, mask=~h & own))
+    return rows, train_tests
 
-    def solve(columns: list[int]) -> tuple[np.ndarray, np.ndarray]:
-        """Least squares of the training residual on the chosen terms' strains and
-        every base sensitivity: (theta per column of `labels`, base step)."""
+
+class _Regression:
+    """The least squares of the training residual on chosen columns and every base
+    sensitivity, scored on the held-out samples."""
+
+    def __init__(self, rows, size: int):
+        self.rows, self.size = rows, size
+
+    def solve(self, columns: list[int]) -> tuple[np.ndarray, np.ndarray]:
+        """(theta per column, base step) of the fit on `columns`."""
         x = np.concatenate(
             [
                 np.concatenate([c[tr][:, columns], s[tr]], 1)
-                for _, c, s, tr, _, _ in rows
+                for _, c, s, tr, _, _ in self.rows
             ]
         )
-        y = np.concatenate([r[tr] for r, _, _, tr, _, _ in rows])
+        y = np.concatenate([r[tr] for r, _, _, tr, _, _ in self.rows])
         norms = np.linalg.norm(x, axis=0)
         norms = np.where(norms > 0, norms, 1.0)
         z = np.linalg.lstsq(x / norms, y, rcond=None)[0] / norms
-        theta = np.zeros(len(labels))
+        theta = np.zeros(self.size)
         theta[columns] = z[: len(columns)]
         return theta, z[len(columns) :]
 
-    def score(theta, step) -> float:
+    def score(self, theta, step) -> float:
+        """The held-out RMSE of what `theta` and `step` leave, mm."""
         sq, n = 0.0, 0
-        for r, cum, sens, _, h, length in rows:
+        for r, cum, sens, _, h, length in self.rows:
             sq += float(np.sum(((r - cum @ theta - sens @ step) * length)[h] ** 2))
             n += int(h.sum())
         return 1e3 * math.sqrt(sq / max(n, 1))
 
-    # Forward selection, each support scored on the held-out samples. The base's
-    # own parameters move with every support (their sensitivities are columns of
-    # every fit): a term the base can mimic by refitting is not a discovery.
-    empty = solve([])
-    path = {(): (empty[0], score(*empty))}
+
+def _select(regression: _Regression, columns: _Columns, min_gain_pct: float):
+    """`(path, best)`: every support of the forward selection with its `(theta,
+    held-out RMSE)`, and the chosen support (empty when none gains `min_gain_pct`
+    over no term; of near-equal ones, within 1 %, the fewest terms)."""
+    # The base's own parameters move with every support (their sensitivities are
+    # columns of every fit): a term the base can mimic by refitting is not a
+    # discovery.
+    kind, labels = columns.kind, columns.labels
+    empty = regression.solve([])
+    path = {(): (empty[0], regression.score(*empty))}
     support: list[int] = []
     for _ in range(min(MAX_TERMS, len(set(kind)))):
         trials = []
         for k in range(len(labels)):
             if kind[k] in {kind[j] for j in support}:
                 continue
-            theta, step = solve([*support, k])
-            trials.append((score(theta, step), k, theta))
+            theta, step = regression.solve([*support, k])
+            trials.append((regression.score(theta, step), k, theta))
         value, k, theta = min(trials, key=lambda v: v[0])
         support.append(k)
         key = tuple(labels[j] for j in sorted(support))
         path.setdefault(key, (theta, value))
-    empty_score = path[()][1]
     best = min(path, key=lambda s: path[s][1])
-    if path[best][1] > (1 - min_gain_pct / 100) * empty_score:
-        best = ()
-    else:
-        near = [s for s in path if path[s][1] <= 1.01 * path[best][1]]
-        best = min(near, key=lambda s: (len(s), path[s][1]))
-    coef = path[best][0]
-    index = [labels.index(label) for label in best]
-    chosen = tuple(kind[i] for i in index)
-    coefficients = np.array([coef[i] for i in index])
-    rates = np.array([rate_of[i] for i in index])
-    accels = np.array([accel_of[i] for i in index])
-    units = tuple(theta_unit(t, f"[{covariate or 'c'}]") for t in chosen)
-    report_path = tuple((s, v[1]) for s, v in path.items())
+    if path[best][1] > (1 - min_gain_pct / 100) * path[()][1]:
+        return path, ()
+    near = [s for s in path if path[s][1] <= 1.01 * path[best][1]]
+    return path, min(near, key=lambda s: (len(s), path[s][1]))
 
-    thetas = dict(zip(THETA_FIELDS, coefficients))
-    thetas.update(
-        {RATE_FIELDS[k]: r for k, r in enumerate(rates) if chosen[k] in MEMORY_TERMS}
-    )
-    thetas.update({ACCEL_FIELDS[k]: a for k, a in enumerate(accels) if a > 0})
-    model = DiscoveredTerm(base, terms=chosen, **thetas) if chosen else base
-    result, values = None, coefficients
-    stderr = np.full(len(chosen), np.nan)
-    if chosen and joint_fit:
-        options = {"multistart": 1, "throw": False, **fit_kwargs}
-        result = fit(
-            model,
-            train_tests,
-            fit=[*shared, *model.used_fields()],
-            per_test=per or None,
-            drive=FORCE_DRIVEN.name,
-            covariate=covariate,
-            **options,
+
+def _fitted_terms(result: FitResult, chosen: tuple[str, ...]):
+    """`(model, values, stderr, rates, accels)` of the chosen terms' joint fit."""
+    index = [result.names.index(n) for n in THETA_FIELDS[: len(chosen)]]
+    values = np.asarray(result.values, float)[index]
+    stderr = np.asarray(result.stderr, float)[index]
+    model = result.model
+    rates, accels = (
+        np.array(
+            [
+                float(getattr(model, fields[k])) if t in MEMORY_TERMS else math.nan
+                for k, t in enumerate(chosen)
+            ]
         )
-        index = [result.names.index(n) for n in THETA_FIELDS[: len(chosen)]]
-        values = np.asarray(result.values, float)[index]
-        stderr = np.asarray(result.stderr, float)[index]
-        model = result.model
-        rates, accels = (
-            np.array(
-                [
-                    float(getattr(model, fields[k])) if t in MEMORY_TERMS else math.nan
-                    for k, t in enumerate(chosen)
-                ]
-            )
-            for fields in (RATE_FIELDS, ACCEL_FIELDS)
-        )
-    how = force_scoring(tests, covariate)
-    base_rmse = how.rmse(base, tests, range(len(tests)), held)
-    rmse = how.rmse(model, tests, range(len(tests)), held) if chosen else base_rmse
-    return DiscoveryResult(
-        terms=chosen,
-        coefficients=coefficients,
-        model=model,
-        fit=result,
-        values=values,
-        stderr=stderr,
-        units=units,
-        equation=_equation(chosen, values, stderr, covariate, rates, accels),
-        rates=rates,
-        accels=accels,
-        support=tuple(best),
-        covariate=covariate,
-        heldout_rmse_mm=(base_rmse, rmse),
-        gain_pct=100.0 * (1.0 - rmse / base_rmse) if base_rmse > 0 else 0.0,
-        path=report_path,
+        for fields in (RATE_FIELDS, ACCEL_FIELDS)
     )
+    return model, values, stderr, rates, accels
 
 
 def term_coefficient(base_fit: FitResult, tests, held, covariate: str, term: str):
@@ -420,21 +464,14 @@ def term_coefficient(base_fit: FitResult, tests, held, covariate: str, term: str
 
     **Arguments:**
 
-    - `base_fit`, `tests`, `held`, `covariate`: as in [`jaxcable.discover`][].
+    - `base_fit`, `tests`, `held`, `covariate`: as in [`discover_terms`][].
     - `term`: the library term (a key of `TERMS`).
 
     **Returns:**
 
     The coefficient, 1/s per unit of the term, or None.
     """
-    found = discover(
-        base_fit,
-        tests,
-        covariate=covariate,
-        held=held,
-        terms=(term,),
-        min_gain_pct=-math.inf,
-        joint_fit=False,
-    )
+    method = Discovery(terms=(term,), min_gain_pct=-math.inf, joint_fit=False)
+    found = discover_terms(base_fit, list(tests), covariate, held, method)
     value = float(found.coefficients[0]) if found.terms else 0.0
     return value if math.isfinite(value) and value != 0.0 else None

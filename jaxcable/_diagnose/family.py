@@ -29,11 +29,13 @@ from .._models import (
     FiveElementModel,
     IntegratedModel,
 )
+from .._problem import Problem
 from .._progress import AbstractProgressMeter
 from .base import BaseFit, fit_base
 from .library import base_start
+from .methods import CandidateSearch
 from .plan import Plan, choose_candidates
-from .verdict import MAX_DELTA_BIC, MIN_AUTOCORRELATION, MIN_GAIN_PCT
+from .rule import MAX_DELTA_BIC, MIN_AUTOCORRELATION, MIN_GAIN_PCT
 
 
 # The base is far from the data when its held-out RMSE is at least this multiple of
@@ -83,6 +85,16 @@ class FamilyScore:
     better: bool = False
     note: str = ""
     fit: Any = dataclasses.field(default=None, repr=False, compare=False)
+
+    def describe(self, unit: str) -> str:
+        """Its row of the summary's table of families (RMSEs in `unit`)."""
+        if self.note:
+            return f"fit failed: {self.note}"
+        return (
+            f"held-out {self.heldout_rmse:.4g} {unit}, gain {self.gain_pct:.1f} %, "
+            f"BIC {self.bic:.1f} (dBIC {self.delta_bic:.1f}), {self.parameters} "
+            "parameters" + (" *" if self.better else "")
+        )
 
     def to_dict(self) -> dict[str, Any]:
         """A JSON-ready dict (the fit left out; NaN and inf as None)."""
@@ -135,18 +147,8 @@ class FamilyCheck:
     def describe(self, unit: str) -> str:
         """The check for the summary: one line, and the table of the families when
         they were compared (RMSEs in `unit`)."""
-        lines = [f"family: {self.chosen}: {self.reason}"]
-        for s in self.scores:
-            if s.note:
-                lines.append(f"  {s.family:<14}fit failed: {s.note}")
-                continue
-            mark = " *" if s.better else ""
-            lines.append(
-                f"  {s.family:<14}held-out {s.heldout_rmse:.4g} {unit}, gain "
-                f"{s.gain_pct:.1f} %, BIC {s.bic:.1f} (dBIC {s.delta_bic:.1f}), "
-                f"{s.parameters} parameters{mark}"
-            )
-        return "\n".join(lines)
+        rows = [f"  {s.family:<14}{s.describe(unit)}" for s in self.scores]
+        return "\n".join([f"family: {self.chosen}: {self.reason}", *rows])
 
 
 def family_of(model: AbstractCableModel) -> str | None:
@@ -181,29 +183,14 @@ def _score(fitted: BaseFit, family: str) -> FamilyScore:
     )
 
 
-def _fit_family(cls, tests, options: dict, meter: AbstractProgressMeter):
-    """`(FamilyScore, BaseFit or None)` of family `cls` fitted on the split of
-    `options`."""
+def _fit_family(cls, problem: Problem, search: CandidateSearch, meter):
+    """`(FamilyScore, BaseFit or None)` of family `cls` fitted on the tests of
+    `problem` (its drives) by the split and fits of `search`."""
     try:
-        start = family_start(cls, tests, options["drive"])
-        plan = choose_candidates(
-            tests,
-            start,
-            fit_names=None,
-            candidates=[],
-            split=options["split"],
-            holdout=options["holdout"],
-            folds=options["folds"],
-            drive=options["drive"],
-        )
-        fitted = fit_base(
-            plan,
-            start,
-            multistart=options["multistart"],
-            max_steps=options["max_steps"],
-            key=options["key"],
-            progress_meter=meter,
-        )
+        start = family_start(cls, problem.tests, problem.drive)
+        own = Problem(start, problem.tests, drive=problem.drive)
+        plan = choose_candidates(own, search.heldout, [])
+        fitted = fit_base(plan, start, search.least_squares, meter)
     except (RuntimeError, ValueError) as e:
         inf = math.inf
         note = str(e).splitlines()[0] if str(e) else type(e).__name__
@@ -212,24 +199,22 @@ def _fit_family(cls, tests, options: dict, meter: AbstractProgressMeter):
 
 
 def check_family(
-    tests,
+    problem: Problem,
     plan: Plan,
     fitted: BaseFit,
     noise: float,
-    model: AbstractCableModel,
-    options: dict,
+    search: CandidateSearch,
     progress_meter: AbstractProgressMeter,
 ) -> tuple[FamilyCheck, AbstractCableModel | None]:
     """The family check of the first round (see the module's description).
 
     **Arguments:**
 
-    - `tests`: the diagnosis's tests.
+    - `problem`: the first round's base: the model as given, the tests and their
+        drives.
     - `plan`, `fitted`, `noise`: the first round's plan, base fit and noise.
-    - `model`: the base model as given.
-    - `options`: the diagnosis's options (split, holdout, folds, drive, multistart,
-        max_steps, key; `family`: None to check when the base is far, True always,
-        False never).
+    - `search`: the diagnosis's [`jaxcable.CandidateSearch`][] (its split and fits;
+        `family`: None to check when the base is far, True always, False never).
     - `progress_meter`: told of each family's fit.
 
     **Returns:**
@@ -237,13 +222,14 @@ def check_family(
     `(check, start)`: the [`FamilyCheck`][] and, when the rounds switch to another
     family, its fitted model as their base's start (else None).
     """
+    model = problem.model
     own = family_of(model)
     heldout = fitted.score.heldout_rmse
     ratio = heldout / noise if noise > 0 else math.inf
     lag = float(fitted.structure["autocorrelation"])
     label = own or type(model).__name__
     facts = dict(ratio=ratio, autocorrelation=lag)
-    wanted = options.get("family")
+    wanted = search.family
     far = is_far(heldout, noise, lag)
     if wanted is False or own is None or not (far or wanted):
         why = (
@@ -262,7 +248,7 @@ def check_family(
     for cls in FAMILIES:
         if cls.CLI_NAME != own:
             progress_meter.say(f"fitting the family {cls.CLI_NAME}")
-            others[cls.CLI_NAME] = _fit_family(cls, tests, options, progress_meter)
+            others[cls.CLI_NAME] = _fit_family(cls, problem, search, progress_meter)
     scores = [base]
     for name, (s, _) in others.items():
         if s.note:

@@ -1,21 +1,17 @@
-"""The first stage of [`jaxcable.diagnose`][]: check its arguments, fix the drives and
-units once on the whole tests, split them into training and held-out data, and choose
-the candidates the data can show and the base can carry."""
+"""The first stage of [`jaxcable.diagnose`][]: check the problem, fix the drives and
+units once on the whole tests, split them into training and held-out data (the
+blocked time split, or cross-validation folds by tests), and choose the candidates
+the data can show and the base can carry."""
 
 import dataclasses
 from collections.abc import Sequence
-from typing import Literal
 
 import numpy as np
 
-from .._fit import as_test_list, declared_parameters, test_id
-from .._models import (
-    COVARIATE_EXTENSIONS,
-    EXTENSIONS,
-    AbstractCableModel,
-    identifiable,
-)
-from .heldout import Fold, splits, with_mask
+from .._fit import declared_parameters, test_id
+from .._models import COVARIATE_EXTENSIONS, EXTENSIONS, identifiable
+from .._problem import Problem
+from .methods import Fold, HeldOut, splits, with_mask
 from .scoring import Scoring, scoring
 
 
@@ -30,7 +26,9 @@ class Plan:
     - `names`: the base parameters to fit.
     - `how`: the drives and residual units ([`Scoring`][]).
     - `parts`: the folds.
-    - `split`, `holdout`, `folds`: as given to [`jaxcable.diagnose`][].
+    - `heldout`: the [`jaxcable.HeldOut`][] the folds were made by.
+    - `folds`: the number of folds by tests (the number of tests when leaving one
+        out).
     - `ids`: the catalogue's candidates to try ([`jaxcable.EXTENSIONS`][] ids).
     - `reasons`: why each of `ids` cannot be tried ("" when it can).
     - `covariate_ids`: the covariates' extensions to try.
@@ -41,13 +39,17 @@ class Plan:
     names: tuple[str, ...]
     how: Scoring
     parts: list[Fold]
-    split: str
-    holdout: float
+    heldout: HeldOut
     folds: int
     ids: tuple[str, ...]
     reasons: dict[str, str]
     covariate_ids: tuple[str, ...]
     columns: tuple[str, ...]
+
+    @property
+    def split(self) -> str:
+        """`"time"` or `"tests"`."""
+        return self.heldout.split
 
     @property
     def time_fold(self) -> Fold:
@@ -60,57 +62,58 @@ class Plan:
         split of force-driven tests."""
         return self.split == "time" and self.how.unit == "mm"
 
-    def split_text(self) -> str:
-        """How held-out data were chosen, in words."""
-        if self.split == "time":
-            return f"last {self.holdout:.0%} of every test's samples"
-        if self.folds == len(self.tests):
-            return "leave-one-test-out"
-        return f"{self.folds}-fold by tests"
 
-
-def _check_arguments(tests, model, ids, split, holdout, k) -> None:
-    """Raise `ValueError` naming the first bad argument of `diagnose`."""
-    if not isinstance(model, AbstractCableModel):
+def _check_problem(problem: Problem, heldout: HeldOut) -> int:
+    """The number of folds by tests; `ValueError` naming what the diagnosis of
+    `problem` cannot take."""
+    tests = problem.tests
+    for name in ("per_test", "transforms"):
+        if getattr(problem, name):
+            raise ValueError(
+                f"`problem.{name}` must be empty: a diagnosis fits shared parameters "
+                "with their own transforms."
+            )
+    if problem.fit is not None and not problem.fit:
         raise ValueError(
-            f"`model` must be a jaxcable model, got {type(model).__name__}."
+            "`problem.fit` is empty: name at least one base parameter to fit, or give "
+            "None for the model's identifiable ones."
         )
-    known = [*EXTENSIONS, *COVARIATE_EXTENSIONS]
-    unknown = [c for c in ids if c not in known]
-    if unknown:
-        raise ValueError(f"`candidates` names {unknown}; known extensions: {known}.")
-    if split not in ("time", "tests"):
-        raise ValueError(f"`split` must be 'time' or 'tests', got {split!r}.")
-    if not (isinstance(holdout, (int, float)) and 0.0 < holdout <= 0.9):
-        raise ValueError(f"`holdout` must be in (0, 0.9], got {holdout!r}.")
-    if split == "tests" and len(tests) < 2:
+    k = len(tests) if heldout.folds is None else heldout.folds
+    if heldout.split == "tests" and len(tests) < 2:
         raise ValueError(
             "`split='tests'` (cross-validation by tests) needs >= 2 tests."
         )
-    if split == "tests" and not (isinstance(k, int) and 2 <= k <= len(tests)):
+    if heldout.split == "tests" and not 2 <= k <= len(tests):
         raise ValueError(f"`folds` must be an int in [2, {len(tests)}], got {k!r}.")
     for i, t in enumerate(tests):
-        if getattr(t, "elongation", None) is None:
+        if t.elongation is None:
             raise ValueError(
                 f"`tests[{i}]` ({test_id(t, i)}) has no elongation to diagnose."
             )
+    return k
+
+
+def _reasons(tests, model, catalogue) -> dict[str, str]:
+    """Why each catalogue candidate cannot be tried: the data cannot show it
+    (`applicability`) or the base cannot carry it (`wrap`); "" when it can."""
+    reasons = {}
+    for ext_id in catalogue:
+        reason = EXTENSIONS[ext_id].applicability(tests)
+        if not reason:
+            try:
+                EXTENSIONS[ext_id].wrap(model)
+            except ValueError as e:
+                reason = str(e)
+        reasons[ext_id] = reason
+    return reasons
 
 
 def choose_candidates(
-    tests,
-    model: AbstractCableModel,
-    *,
-    fit_names: Sequence[str] | None,
-    candidates: Sequence[str] | None,
-    split: Literal["time", "tests"],
-    holdout: float,
-    folds: int | None,
-    drive,
-    covariate: str | None = None,
+    problem: Problem, heldout: HeldOut, candidates: Sequence[str]
 ) -> Plan:
-    """Check the arguments of [`jaxcable.diagnose`][] (same names), resolve the
-    drives once on the whole tests, split them, and choose the candidates the data
-    can show and the base can carry (`applicability`, then `wrap`). `covariate`: the
+    """Check `problem`, resolve the drives once on the whole tests, split them by
+    `heldout`, and choose among `candidates` (extension ids) those the data can show
+    and the base can carry (`applicability`, then `wrap`). `problem.covariate`: the
     extra column the base reads (a covariate's extension named in an earlier round),
     then the only column of the covariates' candidates and of the discovery.
 
@@ -122,53 +125,34 @@ def choose_candidates(
 
     `ValueError` naming the first bad argument.
     """
-    tests = as_test_list(tests)
-    ids = [*EXTENSIONS, *COVARIATE_EXTENSIONS] if candidates is None else [*candidates]
-    k = len(tests) if folds is None else folds
-    _check_arguments(tests, model, ids, split, holdout, k)
-    if fit_names is not None and not [*fit_names]:
-        raise ValueError(
-            "`fit_names` is empty: name at least one base parameter to fit, or give "
-            "None for the model's identifiable ones."
-        )
+    k = _check_problem(problem, heldout)
+    tests = list(problem.tests)
     columns = tuple(covariate_columns(tests))
-    if covariate is not None:
+    if problem.covariate is not None:
         # `Cable.covariate` is one column: the one the base already reads.
-        columns = (covariate,)
+        columns = (problem.covariate,)
     tests = [
-        t
-        if getattr(t, "mask", None) is not None
-        else with_mask(t, np.ones(len(t.time), bool))
+        t if t.mask is not None else with_mask(t, np.ones(len(t.time), bool))
         for t in tests
     ]
-    names = tuple(fit_names) if fit_names is not None else identifiable(model)
+    model = problem.model
+    names = problem.fit if problem.fit is not None else identifiable(model)
     if names is None:  # not in the registry: every parameter
         names = tuple(declared_parameters(model))
-    # The drives and residual units, once for the whole tests: no fold re-detects.
-    how = scoring(tests, drive, covariate)
-    parts = splits(tests, split, holdout, k)
-    catalogue = tuple(i for i in ids if i in EXTENSIONS)
-    reasons = {}
-    for ext_id in catalogue:
-        reason = EXTENSIONS[ext_id].applicability(tests)
-        if not reason:
-            try:
-                EXTENSIONS[ext_id].wrap(model)
-            except ValueError as e:
-                reason = str(e)
-        reasons[ext_id] = reason
+    catalogue = tuple(i for i in candidates if i in EXTENSIONS)
     return Plan(
         tests=tests,
         names=names,
-        how=how,
-        parts=parts,
-        split=split,
-        holdout=holdout,
+        # The drives and residual units, once for the whole tests: no fold
+        # re-detects.
+        how=scoring(tests, problem.drive, problem.covariate),
+        parts=splits(tests, heldout, k),
+        heldout=heldout,
         folds=k,
         ids=catalogue,
-        reasons=reasons,
+        reasons=_reasons(tests, model, catalogue),
         # The covariates' extensions are fitted apart, on the time split.
-        covariate_ids=tuple(i for i in ids if i in COVARIATE_EXTENSIONS),
+        covariate_ids=tuple(i for i in candidates if i in COVARIATE_EXTENSIONS),
         columns=columns,
     )
 
@@ -178,7 +162,7 @@ def covariate_columns(tests) -> list[str]:
     them: each may drive a discovered term or a covariate's extension."""
     common = None
     for t in tests:
-        names = set(getattr(t, "extra", None) or {})
+        names = set(t.extra or {})
         common = names if common is None else common & names
     out = []
     for name in sorted(common or ()):

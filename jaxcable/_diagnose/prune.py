@@ -12,16 +12,17 @@ the final one.
 
 import dataclasses
 import math
-import warnings
 
 import equinox as eqx
 import jax.numpy as jnp
 
-from .._fit import FitResult, IdentifiabilityWarning, field_at, fit
+from .._fit import FitResult, field_at
 from .._models import DiscoveredTerm
+from .._problem import LeastSquares, Problem
+from .methods import fit_quietly
 from .plan import Plan
+from .rule import MAX_DELTA_BIC, MIN_GAIN_PCT
 from .scoring import bic
-from .verdict import MAX_DELTA_BIC, MIN_GAIN_PCT
 
 
 @dataclasses.dataclass(frozen=True)
@@ -68,7 +69,7 @@ def switched_off(model, prefix: str):
 
 
 def prune(
-    plan: Plan, final: FitResult, heldout: float, count: int, options: dict
+    plan: Plan, final: FitResult, heldout: float, count: int, method: LeastSquares
 ) -> Pruned:
     """Try each cause but the last out of the final model (see the module's
     description); on the time split only (cross-validation by tests keeps every
@@ -81,7 +82,7 @@ def prune(
         the last one outermost.
     - `heldout`: its held-out RMSE.
     - `count`: how many causes wrap the user's base in it.
-    - `options`: `diagnose`'s options (`max_steps`).
+    - `method`: the refits' [`jaxcable.LeastSquares`][].
 
     **Returns:**
 
@@ -103,17 +104,16 @@ def prune(
             for n in dict.fromkeys(x.split("[")[0] for x in current.names)
             if n not in layer
         ]
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", IdentifiabilityWarning)
-            reduced = fit(
+        reduced = fit_quietly(
+            Problem(
                 model,
                 plan.time_fold.train,
                 fit=names,
                 drive=how.drive_names,
                 covariate=how.covariate,
-                throw=False,
-                max_steps=options["max_steps"],
-            )
+            ),
+            method,
+        )
         if not math.isfinite(reduced.loss):
             continue
         rmse = how.rmse(reduced.model, plan.tests, range(len(plan.tests)), held)

@@ -20,7 +20,7 @@ are reported as tried (`accepted` False) and the verdict stays what the rounds
 before them gave.
 
 The first round checks the base's family before any candidate
-(`jaxcable._diagnose.family`): when its base is far from the data, the other base
+(`family_stage`): when its base is far from the data, the other base
 models are fitted on the same split, and one clearly better held out becomes the
 base of every round.
 
@@ -36,148 +36,16 @@ min). The discovered term is named instead only when its held-out RMSE is
 """
 
 import dataclasses
-from collections.abc import Sequence
 
-from .._models import COVARIATE_EXTENSIONS, EXTENSIONS, AbstractCableModel
+from .._problem import LeastSquares, Problem
 from .._progress import AbstractProgressMeter
-from .base import fit_base
-from .catalogue import score_catalogue
-from .covariates import covariate_candidates
-from .family import check_family
+from .diagnosis import Candidate, Diagnosis
 from .library import base_start
-from .outcome import conclude, verdict
-from .plan import Plan, choose_candidates
+from .methods import CandidateSearch
+from .plan import Plan
 from .prune import Pruned, prune
-from .result import Candidate, Diagnosis
-from .scoring import noise_floor
-from .stage import discovery_stage
-from .verdict import (
-    MAX_DELTA_BIC,
-    MAX_FLOOR_RATIO,
-    MIN_EXCESS,
-    MIN_GAIN_PCT,
-    MIN_PARTIAL_GAIN_PCT,
-    Verdict,
-    sufficient,
-)
-
-
-@dataclasses.dataclass(frozen=True)
-class RoundBase:
-    """The base of one round.
-
-    **Fields:**
-
-    - `model`: the base model, with its start values (the previous round's fit).
-    - `label`: its name in the summary, e.g. `IntegratedModel + sensor_drift`.
-    - `names`: its parameters to fit (None: the registry's identifiable set).
-    - `covariate`: the extra column it reads, or None.
-    - `exclude`: the candidate ids not tried any more (named before).
-    """
-
-    model: AbstractCableModel
-    label: str
-    names: tuple[str, ...] | None
-    covariate: str | None
-    exclude: frozenset[str]
-
-
-def _base_stage(tests, base: RoundBase, candidates, options: dict, meter):
-    """`(plan, fitted base)` of a round around `base`."""
-    ids = [*EXTENSIONS, *COVARIATE_EXTENSIONS] if candidates is None else candidates
-    ids = [i for i in ids if i not in base.exclude]
-    plan = choose_candidates(
-        tests,
-        base.model,
-        fit_names=base.names,
-        candidates=ids,
-        split=options["split"],
-        holdout=options["holdout"],
-        folds=options["folds"],
-        drive=options["drive"],
-        covariate=base.covariate,
-    )
-    fitted = fit_base(
-        plan,
-        base.model,
-        multistart=options["multistart"],
-        max_steps=options["max_steps"],
-        key=options["key"],
-        progress_meter=meter,
-    )
-    return plan, fitted
-
-
-def one_round(
-    tests, base: RoundBase, candidates, options: dict, meter, *, first: bool = False
-) -> tuple[Diagnosis, Plan, RoundBase]:
-    """One pass of the stages around `base` (see `jaxcable._diagnose.diagnose`): its
-    diagnosis, plan and base. The `first` round checks the base's family
-    ([`check_family`][]) before any candidate, and runs on the family the data
-    want (its base then that family's)."""
-    plan, fitted = _base_stage(tests, base, candidates, options, meter)
-    noise = noise_floor(plan.tests, plan.how, fitted)
-    family = None
-    if first:
-        family, start = check_family(
-            tests, plan, fitted, noise, base.model, options, meter
-        )
-        if start is not None:
-            base = dataclasses.replace(
-                base, model=start, label=type(start).__name__, names=None
-            )
-            plan, fitted = _base_stage(tests, base, candidates, options, meter)
-            noise = noise_floor(plan.tests, plan.how, fitted)
-    max_steps = options["max_steps"]
-    found = score_catalogue(plan, base.model, fitted, progress_meter=meter)
-    if plan.on_time_split_in_mm:
-        found += covariate_candidates(
-            plan, fitted, max_steps=max_steps, progress_meter=meter
-        )
-    decision = verdict(fitted, noise, found)
-    discovered = None
-    auto = options["discover"] is None
-    wanted = decision.verdict == "unexplained" if auto else options["discover"]
-    unused = auto and _discovery_may_beat(plan, base, found, decision, noise)
-    if (wanted or unused) and plan.on_time_split_in_mm:
-        discovered = discovery_stage(
-            plan, fitted, max_steps=max_steps, progress_meter=meter
-        )
-        if discovered is not None:
-            before = decision
-            found += (discovered.candidate,)
-            decision = verdict(fitted, noise, found)
-            if unused:
-                decision = _named_unless_beaten(before, decision, found)
-    d = conclude(plan, base.label, fitted, found, decision, noise, discovered)
-    return dataclasses.replace(d, family=family), plan, base
-
-
-def _discovery_may_beat(plan: Plan, base: RoundBase, found, decision: Verdict, noise):
-    """Whether `decision` names a cause that leaves more than `MIN_EXCESS` x `noise`
-    held out and either reads none of the recorded covariates (nor does the base)
-    or reads one through a covariate form (the catalogue's have no memory)."""
-    if decision.verdict != "named":
-        return False
-    named = found[decision.named]
-    if not named.heldout_rmse > MIN_EXCESS * noise:
-        return False
-    read = {base.covariate, named.covariate}
-    unused = [c for c in plan.columns if c not in read]
-    return bool(unused) or named.covariate is not None
-
-
-def _named_unless_beaten(before: Verdict, after: Verdict, found) -> Verdict:
-    """`after` (the verdict with the discovered term, last of `found`) when it names
-    the term and the term's held-out RMSE is `MIN_GAIN_PCT` % below that of the
-    cause `before` named; else `after` naming that cause."""
-    term, named = found[-1], found[before.named]
-    if (
-        after.named == len(found) - 1
-        and term.heldout_rmse <= (1.0 - MIN_GAIN_PCT / 100.0) * named.heldout_rmse
-    ):
-        return after
-    return after._replace(verdict=before.verdict, named=before.named)
+from .rule import MAX_DELTA_BIC, MAX_FLOOR_RATIO, MIN_PARTIAL_GAIN_PCT, sufficient
+from .stages import RoundBase, effect_of, one_round
 
 
 def partial_cause(d: Diagnosis) -> Candidate | None:
@@ -214,115 +82,143 @@ def next_base(base: RoundBase, cause: Candidate) -> RoundBase:
     """The base of the next round: the model of `cause`'s fit (per-test values
     averaged), its fitted parameters free."""
     fit = cause.fit
-    model = base_start(fit)
     names = tuple(dict.fromkeys(n.split("[")[0] for n in fit.names))
-    covariate = cause.covariate or base.covariate
+    problem = dataclasses.replace(
+        base.problem,
+        model=base_start(fit),
+        fit=names,
+        covariate=cause.covariate or base.problem.covariate,
+    )
     # A covariate's candidate is tried once per form: `mechano_sorptive[h]` named,
     # `mechano_sorptive` is not tried again.
     return RoundBase(
-        model=model,
+        problem=problem,
         label=f"{base.label} + {cause.id}",
-        names=names,
-        covariate=covariate,
         exclude=base.exclude | {cause.id, cause.id.split("[")[0]},
     )
 
 
 def diagnose_rounds(
-    tests,
-    model: AbstractCableModel,
-    *,
-    fit_names: Sequence[str] | None,
-    candidates: Sequence[str] | None,
-    max_rounds: int,
-    options: dict,
-    progress_meter: AbstractProgressMeter,
+    problem: Problem, search: CandidateSearch, progress_meter: AbstractProgressMeter
 ) -> Diagnosis:
     """Round after round until nothing is left to name (see the module's
     description); the first round's [`jaxcable.Diagnosis`][] with the causes,
     their gains, the final held-out RMSE and every round."""
-    base = RoundBase(
-        model,
-        type(model).__name__,
-        None if fit_names is None else tuple(fit_names),
-        None,
-        frozenset(),
-    )
-    rounds: list[Diagnosis] = []
-    plans: list[Plan] = []
-    kept = 0  # the rounds whose causes are kept
-    pending = None  # the round of a partial cause not yet confirmed
-    final = None  # (plan, fit, held-out RMSE) of a round whose base has every cause
-    for k in range(max_rounds):
+    chain = _Chain()
+    base = RoundBase(problem, type(problem.model).__name__)
+    for k in range(search.max_rounds):
         if k:
             progress_meter.say(f"round {k + 1}: base {base.label}")
-        d, plan, base = one_round(
-            tests, base, candidates, options, progress_meter, first=not k
-        )
-        plans.append(plan)
-        cause = d.candidate(d.named_cause) if d.verdict == "named" else None
-        partial = None
-        if cause is None and k + 1 < max_rounds:
-            partial = partial_cause(d)
-        if cause is None and partial is None:
-            if d.verdict == "none" and k and (pending is not None or kept == k):
-                # Refitted together, the causes so far leave only the noise (the
-                # last candidate's own fit can stop short of that): this round's
-                # base confirms a pending chain, and is the final model.
-                start = rounds[0 if pending is None else pending]
-                if (pending is None or _known_chain(rounds, pending)) and sufficient(
-                    start.base_heldout_rmse, d.base_heldout_rmse, start.noise
-                ):
-                    pending, kept = None, k
-                    final = (plan, d.base_fit, d.base_heldout_rmse)
-            rounds.append(d)
-            break
-        cause = cause or partial
-        d = _with_cause(d, cause)
-        rounds.append(d)
-        if partial is not None:
-            # A chain of partial causes is judged from its first round on.
-            pending = k if pending is None else pending
-        elif pending is not None:
-            start = rounds[pending]
-            if _known_chain(rounds, pending) and sufficient(
-                start.base_heldout_rmse, cause.heldout_rmse, start.noise
-            ):
-                pending, kept = None, k + 1
-        else:
-            kept = k + 1
-        if cause.heldout_rmse <= MAX_FLOOR_RATIO * d.noise:
+        d, plan, base = one_round(base, search, progress_meter, first=not k)
+        cause = chain.add(d, plan, last=k + 1 == search.max_rounds)
+        if cause is None or cause.heldout_rmse <= MAX_FLOOR_RATIO * d.noise:
             break
         base = next_base(base, cause)
-    rounds = [
-        r
-        if i < kept or r.verdict != "named"
-        else dataclasses.replace(
-            r,
-            accepted=False,
-            note="a partial cause, tried as the base of the next round and not "
-            "kept: the causes after it did not explain the rest",
-        )
-        for i, r in enumerate(rounds)
-    ]
+    rounds = chain.marked()
     pruned = None
-    if kept:
-        last = rounds[kept - 1]
-        cause = last.candidate(last.named_cause)
-        plan = plans[kept - 1]
-        plan = dataclasses.replace(
-            plan, how=plan.how._replace(covariate=cause.covariate or plan.how.covariate)
-        )
-        fit, heldout = cause.fit, cause.heldout_rmse
-        if final is not None:
-            plan, fit, heldout = final
-        if kept > 1:
+    if chain.kept:
+        if chain.kept > 1:
             progress_meter.say("trying each earlier cause out of the final model")
-        pruned = prune(plan, fit, heldout, kept, options)
+        # The refits of the pruning start from a fitted model, with the fit's
+        # default of four starts.
+        method = LeastSquares(
+            solver=search.least_squares.solver,
+            max_steps=search.least_squares.max_steps,
+        )
+        pruned = prune(*chain.final_model(), chain.kept, method)
         for i, note in enumerate(pruned.notes):
             if note:
                 rounds[i] = dataclasses.replace(rounds[i], accepted=False, note=note)
-    return _combined(rounds, kept, pruned)
+    return _combined(rounds, chain.kept, pruned)
+
+
+class _Chain:
+    """The rounds so far and which of their causes are kept.
+
+    **Attributes:**
+
+    - `rounds`, `plans`: every round's diagnosis (its cause named) and plan.
+    - `kept`: the number of rounds whose causes are kept.
+    - `pending`: the round of a partial cause not yet confirmed, or None.
+    - `final`: `(plan, fit, held-out RMSE)` of a round whose base has every cause
+        (it confirmed the chain while its own candidates named nothing), or None.
+    """
+
+    def __init__(self):
+        self.rounds: list[Diagnosis] = []
+        self.plans: list[Plan] = []
+        self.kept = 0
+        self.pending: int | None = None
+        self.final = None
+
+    def add(self, d: Diagnosis, plan: Plan, last: bool) -> Candidate | None:
+        """Record round `d`: the cause the rounds go on with (named, or partial
+        unless it is the `last` round), or None when they stop."""
+        k = len(self.rounds)
+        self.plans.append(plan)
+        cause = d.candidate(d.named_cause) if d.verdict == "named" else None
+        partial = partial_cause(d) if cause is None and not last else None
+        if cause is None and partial is None:
+            self._confirm_by_base(d, plan, k)
+            self.rounds.append(d)
+            return None
+        cause = cause or partial
+        self.rounds.append(_with_cause(d, cause))
+        if partial is not None:
+            # A chain of partial causes is judged from its first round on.
+            self.pending = k if self.pending is None else self.pending
+        elif self.pending is not None:
+            start = self.rounds[self.pending]
+            if _known_chain(self.rounds, self.pending) and sufficient(
+                start.base_heldout_rmse, cause.heldout_rmse, start.noise
+            ):
+                self.pending, self.kept = None, k + 1
+        else:
+            self.kept = k + 1
+        return cause
+
+    def _confirm_by_base(self, d: Diagnosis, plan: Plan, k: int) -> None:
+        """A round `k` that names nothing with nothing left: refitted together, the
+        causes so far leave only the noise (the last candidate's own fit can stop
+        short of that), so this round's base confirms a pending chain and is the
+        final model."""
+        if not (d.verdict == "none" and k):
+            return
+        if self.pending is None and self.kept != k:
+            return
+        start = self.rounds[0 if self.pending is None else self.pending]
+        if (
+            self.pending is None or _known_chain(self.rounds, self.pending)
+        ) and sufficient(start.base_heldout_rmse, d.base_heldout_rmse, start.noise):
+            self.pending, self.kept = None, k
+            self.final = (plan, d.base_fit, d.base_heldout_rmse)
+
+    def marked(self) -> list[Diagnosis]:
+        """Every round, a named cause of a round after the kept ones marked as not
+        kept (a partial cause its later rounds did not confirm)."""
+        return [
+            r
+            if i < self.kept or r.verdict != "named"
+            else dataclasses.replace(
+                r,
+                accepted=False,
+                note="a partial cause, tried as the base of the next round and not "
+                "kept: the causes after it did not explain the rest",
+            )
+            for i, r in enumerate(self.rounds)
+        ]
+
+    def final_model(self):
+        """`(plan, fit, held-out RMSE)` of the model with every kept cause: the last
+        kept cause's fit, on its round's plan (driven by its covariate), unless a
+        later round's base confirmed the chain."""
+        if self.final is not None:
+            return self.final
+        last = self.rounds[self.kept - 1]
+        cause = last.candidate(last.named_cause)
+        plan = self.plans[self.kept - 1]
+        how = plan.how._replace(covariate=cause.covariate or plan.how.covariate)
+        return dataclasses.replace(plan, how=how), cause.fit, cause.heldout_rmse
 
 
 def _known_chain(rounds: list[Diagnosis], pending: int) -> bool:
@@ -344,12 +240,7 @@ def _with_cause(d: Diagnosis, cause: Candidate) -> Diagnosis:
         named_cause=cause.id,
         extended_heldout_rmse=cause.heldout_rmse,
         gain_pct=cause.gain_pct,
-        effect={
-            "parameter": cause.size_name,
-            "value": cause.size,
-            "stderr": cause.size_stderr,
-            "unit": cause.size_unit,
-        },
+        effect=effect_of(cause),
     )
 
 
@@ -390,14 +281,3 @@ def _combined(rounds: list[Diagnosis], kept: int, pruned: Pruned | None) -> Diag
         final_fit=pruned.fit if causes else None,
         rounds=tuple(rounds) if len(rounds) > 1 else (),
     )
-
-
-def check_max_rounds(max_rounds) -> int:
-    """`max_rounds` checked: an int >= 1."""
-    if (
-        isinstance(max_rounds, bool)
-        or not isinstance(max_rounds, int)
-        or max_rounds < 1
-    ):
-        raise ValueError(f"`max_rounds` must be an int >= 1, got {max_rounds!r}.")
-    return max_rounds

@@ -1,4 +1,5 @@
-"""The verdict of a diagnosis: a catalogue cause is named only when it explains the
+"""The rule of a diagnosis, and every threshold it uses (each defined here, once):
+a catalogue cause is named only when it explains the
 residual, not merely when it improves it.
 
 Three outcomes:
@@ -52,12 +53,15 @@ from typing import NamedTuple
 
 
 # Significance thresholds of a candidate (see `jaxcable.diagnose`): its held-out gain
-# over the base, %; ΔBIC on the training samples; |size| / standard error.
+# over the base, %; ΔBIC on the training samples; |size| / standard error. The same
+# gain keeps a support of the discovery ([`jaxcable.Discovery`][]): on noise alone, a
+# term fitted to the training samples predicts the held-out ones by chance by at most
+# a few percent.
 MIN_GAIN_PCT = 5.0
 MAX_DELTA_BIC = -10.0
 MIN_SIZE_Z = 3.0
 # The held-out gain, %, of a known candidate a round may go on with when its size is
-# within MIN_SIZE_Z standard errors (`jaxcable._diagnose.rounds.partial_cause`).
+# within MIN_SIZE_Z standard errors (`partial_cause` of the rounds).
 MIN_PARTIAL_GAIN_PCT = 2.0 * MIN_GAIN_PCT
 # Nothing is named while the base already predicts the held-out data to within 20 % of
 # the noise level estimated from the data: what is left is noise, and a candidate that
@@ -77,6 +81,20 @@ MAX_DIVERGENCE = 2.0
 # smooth error s on white noise sigma has lag-1 autocorrelation s^2 / (s^2 + sigma^2),
 # 0.5 where s = sigma (a base at sqrt(2) x the noise).
 MIN_AUTOCORRELATION = 0.5
+
+
+def thresholds() -> dict[str, float]:
+    """The thresholds of the rule by their names in the JSON of a diagnosis."""
+    return {
+        "min_gain_pct": MIN_GAIN_PCT,
+        "max_delta_bic": MAX_DELTA_BIC,
+        "min_size_z": MIN_SIZE_Z,
+        "min_excess_over_noise": MIN_EXCESS,
+        "max_heldout_over_noise": MAX_FLOOR_RATIO,
+        "min_explained_pct": MIN_EXPLAINED_PCT,
+        "min_autocorrelation_unexplained": MIN_AUTOCORRELATION,
+        "max_divergence": MAX_DIVERGENCE,
+    }
 
 
 class Verdict(NamedTuple):

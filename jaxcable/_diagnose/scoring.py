@@ -22,20 +22,21 @@ from .._drive import FORCE_DRIVEN, AbstractTestDrive, as_test_drive
 from .._fit import (
     FitResult,
     as_test_list,
-    model_responses,
     pad_tests,
     resolve_drives,
+    responses,
 )
 from .._io import ControlDetection, TestData
 from .._models import AbstractCableModel
-from .heldout import Fold, time_split
+from .diagnosis import Candidate
+from .methods import Fold, time_split
 from .noise import (
     Noise as Noise,
     channel_noise as channel_noise,
     noise_floor as noise_floor,
     noise_level as noise_level,
 )
-from .result import MAX_DELTA_BIC, MIN_GAIN_PCT, MIN_SIZE_Z, Candidate
+from .rule import MAX_DELTA_BIC, MIN_GAIN_PCT, MIN_SIZE_Z
 
 
 # How a diagnosis reports a residual unit: its name and the factor from the residual
@@ -82,7 +83,7 @@ def model_outputs(
 
     One array per test, m or N; NaN throughout a test whose simulation failed.
     """
-    return model_responses(result, tests, _drive_names(drive), covariate=covariate)
+    return responses(result, tests, _drive_names(drive), covariate)
 
 
 def model_elongations(

@@ -5,7 +5,7 @@ squares), the flagged diverging candidates, what was named and what is left."""
 import math
 
 from .._drive import as_test_drive
-from .verdict import (
+from .rule import (
     MAX_DELTA_BIC,
     MAX_FLOOR_RATIO,
     MIN_AUTOCORRELATION,
