@@ -4,10 +4,10 @@ run."""
 
 import argparse
 import dataclasses
-import math
 
 import numpy as np
 
+from .. import _checks
 from .._diagnose import CandidateSearch, Diagnosis
 from .._models import EXTENSIONS
 from .._problem import LeastSquares, Problem
@@ -28,7 +28,7 @@ from .fit import (
 )
 from .limits import strain_at_load, with_strain_from_load
 from .models import ModelChoice, data_start, names_option, resolve_model
-from .numbers import at_least, number, positive_float, positive_int, seed
+from .numbers import at_least, fraction, positive_float, positive_int, seed
 from .outputs import refuse_inputs, say_replacing, write_errors
 
 
@@ -47,6 +47,7 @@ DESCRIPTION = (
 
 
 def _speeds(text: str) -> tuple[float, float]:
+    """An argparse `type`: the speed range MIN,MAX, mm/min, 0 < MIN <= MAX."""
     parts = text.split(",")
     try:
         low, high = (float(p) for p in parts)
@@ -54,13 +55,16 @@ def _speeds(text: str) -> tuple[float, float]:
         raise argparse.ArgumentTypeError(
             f"{text!r} is not two numbers MIN,MAX (mm/min)"
         ) from None
-    if not 0 < low <= high < math.inf:
-        raise argparse.ArgumentTypeError(f"{text!r} needs 0 < MIN <= MAX")
+    try:
+        _checks.require_number("MIN", low, 0.0, strict=True)
+        _checks.require_number("MAX", high, low)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} needs 0 < MIN <= MAX") from None
     return low, high
 
 
 _positive = positive_float
-_fraction = number(float, "a number", lambda v: 0 < v <= 1, "must be in (0, 1]")
+_fraction = fraction
 _int = positive_int
 
 
