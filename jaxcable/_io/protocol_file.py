@@ -362,9 +362,12 @@ def _segment_kind(path: str, where: str, segment) -> str:
     return kind
 
 
-def _top_level(path: str, doc) -> tuple[_Reader, dict[str, float | str]]:
-    """The reader of the file's top-level object and its metadata (the cable's
-    sizes, checked against their ranges, and the strings)."""
+def _top_level(
+    path: str, doc
+) -> tuple[_Reader, tuple[float, float, float], dict[str, float | str]]:
+    """The reader of the file's top-level object, the cable's length, diameter (mm)
+    and crosshead speed (mm/min), checked against their ranges, and the metadata
+    (those and the strings)."""
     if not isinstance(doc, dict):
         raise ValueError(
             f"{path}: a protocol file is a JSON object with length_mm and segments, "
@@ -391,7 +394,7 @@ def _top_level(path: str, doc) -> tuple[_Reader, dict[str, float | str]]:
                 raise top.error(key, f"{_show(doc[key])} is not a string.")
             metadata[key] = doc[key]
     metadata.update(length_mm=length, diameter_mm=diameter, rate_mm_per_min=rate)
-    return top, metadata
+    return top, (length, diameter, rate), metadata
 
 
 def read_protocol(path: str | os.PathLike) -> ProtocolFile:
@@ -416,13 +419,13 @@ def read_protocol(path: str | os.PathLike) -> ProtocolFile:
     """
     path = str(path)
     doc = read_json(path, "a protocol file")
-    top, metadata = _top_level(path, doc)
+    top, (length, diameter, rate), metadata = _top_level(path, doc)
     # A protocol names no material: no strain limit unless the caller gives one
     # (`jaxcable simulate --breaking-strain`), as for a data file without one.
     cable = Cable.from_mm(
-        length_mm=metadata["length_mm"],
-        diameter_mm=metadata["diameter_mm"],
-        rate_mm_per_min=metadata["rate_mm_per_min"],
+        length_mm=length,
+        diameter_mm=diameter,
+        rate_mm_per_min=rate,
         breaking_strain=math.inf,
     )
     if "segments" not in doc:
@@ -433,7 +436,7 @@ def read_protocol(path: str | os.PathLike) -> ProtocolFile:
     segments = doc["segments"]
     if not isinstance(segments, list) or not segments:
         raise top.error("segments", "must be a non-empty list of segment objects.")
-    builder = _Builder(cable, metadata["diameter_mm"])
+    builder = _Builder(cable, diameter)
     for i, segment in enumerate(segments):
         where = f"segments[{i}]"
         kind = _segment_kind(path, where, segment)
