@@ -87,7 +87,9 @@ def main():
         known = _fit([first])
         least = int(np.argmax(known.relative_error))
         t0 = time.perf_counter()
-        designed = jc.design_test(known, budget=budget, cable=CABLE, steps=args.steps)
+        designed = jc.design_test(
+            known, jc.TestDesign(budget, steps=args.steps), cable=CABLE
+        )
         t_design = time.perf_counter() - t0
         new = synthesize(
             TRUTH,
@@ -125,14 +127,14 @@ def main():
                 ([first, std], with_standard),
             ):
                 post = jc.sample_posterior(
-                    TRUTH,
-                    tests,
-                    fit=NAMES,
+                    jc.Problem(TRUTH, tests, fit=NAMES),
+                    jc.NUTS(
+                        num_samples=args.posterior,
+                        num_chains=2,
+                        num_warmup=args.posterior,
+                        key=jax.random.key(seed),
+                    ),
                     start=fit,
-                    num_samples=args.posterior,
-                    num_chains=2,
-                    num_warmup=args.posterior,
-                    key=jax.random.key(seed),
                 )
                 sds.append(float(post.sd[least]))
             row["posterior_sd_designed"], row["posterior_sd_standard"] = sds

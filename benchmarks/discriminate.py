@@ -16,9 +16,9 @@ each test, and from the extension's declared start), and a seed is kept when the
 sets the target is about); seeds are drawn until `--seeds` are kept, the others
 counted. Then per kept seed:
 
-1. `jaxcable.design_test((fit_true, fit_rival), ...)` designs one test of
+1. `jaxcable.design_discriminating_test(diagnosis, ...)` designs one test of
    `--duration` s on the 300 mm cable (forces up to 100 N, 1-100 mm/min, 240
-   samples, two blocks) from the two candidates refitted to every sample.
+   samples, two blocks) from the diagnosis's two candidates (as it fitted them).
 2. The designed test and Park's 10-cycle protocol filling the same duration (a
    rest after the cycles) are each synthesised from the truth (new noise).
 3. Both candidates are refitted (the same parameters, the better of two starts:
@@ -156,8 +156,8 @@ def main():
             skipped.append({"seed": seed, "gap": gap, "gap_diagnosis": gap_diagnosis})
             print(f"seed {seed}: gap {gap:+.1f}, not ambiguous: skipped", flush=True)
             continue
-        designed = jc.design_test(
-            diagnosis, budget=budget, cable=cable, steps=args.steps
+        designed = jc.design_discriminating_test(
+            diagnosis, jc.TestDesign(budget, steps=args.steps), cable=cable
         )
         new = synthesize(
             truth,

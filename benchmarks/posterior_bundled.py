@@ -88,15 +88,15 @@ def main():
     meter = jc.TextProgressMeter() if args.progress else jc.NoProgressMeter()
     t0 = time.perf_counter()
     post = jc.sample_posterior(
-        model,
-        tests,
-        fit=names,
+        jc.Problem(model, tests, fit=names),
+        jc.NUTS(
+            num_samples=args.draws,
+            num_chains=args.chains,
+            num_warmup=args.warmup,
+            max_doublings=args.max_doublings,
+            key=jax.random.key(0),
+        ),
         start=fit,
-        num_samples=args.draws,
-        num_chains=args.chains,
-        num_warmup=args.warmup,
-        max_doublings=args.max_doublings,
-        key=jax.random.key(0),
         progress_meter=meter,
     )
     t_post = time.perf_counter() - t0

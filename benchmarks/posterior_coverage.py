@@ -138,15 +138,15 @@ def main():
             fit = jc.fit(problem, jc.LeastSquares(multistart=1), throw=False)
         t_fit = time.perf_counter() - t0
         post = jc.sample_posterior(
-            START,
-            tests,
-            fit=NAMES,
+            problem,
+            jc.NUTS(
+                num_samples=args.draws,
+                num_chains=args.chains,
+                num_warmup=args.warmup,
+                key=jax.random.key(seed),
+                noise=args.noise,
+            ),
             start=fit,
-            noise=args.noise,
-            num_samples=args.draws,
-            num_chains=args.chains,
-            num_warmup=args.warmup,
-            key=jax.random.key(seed),
             progress_meter=meter,
         )
         low, high = post.interval(0.95)

@@ -128,10 +128,12 @@ from ._progress import (
 from ._report import write_diagnosis_report as write_diagnosis_report
 from ._results import RESULTS as RESULTS
 from ._uncertainty import (
+    NUTS as NUTS,
     DesignedTest as DesignedTest,
     DiscriminatingTest as DiscriminatingTest,
     Posterior as Posterior,
     TestBudget as TestBudget,
+    TestDesign as TestDesign,
     design_discriminating_test as design_discriminating_test,
     design_test as design_test,
     sample_posterior as sample_posterior,

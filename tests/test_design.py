@@ -46,7 +46,7 @@ def burgers_fit(creep_csv):
 
 @pytest.fixture(scope="module")
 def designed(burgers_fit):
-    return jc.design_test(burgers_fit, budget=BUDGET, cable=CABLE, steps=2)
+    return jc.design_test(burgers_fit, jc.TestDesign(BUDGET, steps=2), cable=CABLE)
 
 
 def test_designed_test_teaches(designed, tmp_path):
@@ -93,15 +93,36 @@ def test_budget_errors_name_the_field(kwargs, match):
         jc.TestBudget(**kwargs)
 
 
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        (dict(budget={"duration_s": 10.0}), "budget"),
+        (dict(steps=-1), "steps"),
+        (dict(steps=2.0), "steps"),
+        (dict(learning_rate=0.0), "learning_rate"),
+        (dict(learning_rate=float("inf")), "learning_rate"),
+    ],
+)
+def test_test_design_errors_name_the_field(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        jc.TestDesign(**{"budget": BUDGET, **kwargs})
+
+
 def test_design_rejects_other_inputs(burgers_fit):
-    with pytest.raises(ValueError, match="fit_or_posterior"):
-        jc.design_test("fit", budget=BUDGET, cable=CABLE)
+    method = jc.TestDesign(BUDGET)
+    with pytest.raises(ValueError, match="known"):
+        jc.design_test("fit", method, cable=CABLE)
+    # Two candidates are separated by design_discriminating_test alone.
+    with pytest.raises(ValueError, match="design_discriminating_test"):
+        jc.design_test((burgers_fit, burgers_fit), method, cable=CABLE)
     with pytest.raises(ValueError, match="candidates"):
-        jc.design_discriminating_test((burgers_fit,), budget=BUDGET, cable=CABLE)
+        jc.design_discriminating_test((burgers_fit,), method, cable=CABLE)
+    with pytest.raises(ValueError, match="method"):
+        jc.design_test(burgers_fit, BUDGET, cable=CABLE)
+    with pytest.raises(ValueError, match="cable"):
+        jc.design_discriminating_test((burgers_fit, burgers_fit), method, cable=None)
     with pytest.raises(ValueError, match="targets"):
-        jc.design_test(
-            (burgers_fit, burgers_fit), budget=BUDGET, cable=CABLE, targets=["E1"]
-        )
+        jc.design_test(burgers_fit, method, cable=CABLE, targets=["nope"])
 
 
 def test_lack_of_fit_is_the_refitted_residual():
@@ -127,7 +148,8 @@ def separating(burgers_fit, creep_csv):
     # load.
     problem = jc.Problem(jc.HookeModel(), [jc.read_test(creep_csv)])
     hooke = jc.fit(problem, jc.LeastSquares(multistart=1))
-    return jc.design_test((burgers_fit, hooke), budget=BUDGET, cable=CABLE, steps=2)
+    method = jc.TestDesign(BUDGET, steps=2)
+    return jc.design_discriminating_test((burgers_fit, hooke), method, cable=CABLE)
 
 
 def test_discriminating_test_separates(separating, tmp_path):
@@ -198,4 +220,4 @@ def test_a_diagnosis_gives_its_two_leading_candidates(burgers_fit):
     assert (name_a, name_b, now) == ("c", "e", 8.0)
     object.__setattr__(diagnosis, "candidates", [candidate("a", -5.0)])
     with pytest.raises(ValueError, match="fewer than two"):
-        jc.design_test(diagnosis, budget=BUDGET, cable=CABLE)
+        jc.design_discriminating_test(diagnosis, jc.TestDesign(BUDGET), cable=CABLE)

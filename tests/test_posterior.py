@@ -35,14 +35,10 @@ def _creep(force, seed):
 @pytest.fixture(scope="module")
 def posterior():
     tests = [_creep(20.0, 0), _creep(40.0, 1)]
-    return jc.sample_posterior(
-        START,
-        tests,
-        num_samples=120,
-        num_chains=2,
-        num_warmup=100,
-        key=jax.random.key(1),
+    method = jc.NUTS(
+        num_samples=120, num_chains=2, num_warmup=100, key=jax.random.key(1)
     )
+    return jc.sample_posterior(jc.Problem(START, tests), method)
 
 
 def test_rhat_and_ess_know_mixing():
@@ -111,13 +107,27 @@ def test_arviz_conversion_or_clear_error(posterior):
         (dict(noise="gaussian"), "noise"),
         (dict(num_samples=2), "num_samples"),
         (dict(num_chains=0), "num_chains"),
+        (dict(num_warmup=1.5), "num_warmup"),
+        (dict(max_doublings=True), "max_doublings"),
         (dict(prior_scale=-1.0), "prior_scale"),
-        (dict(start="fit"), "start"),
+        (dict(prior_scale=float("nan")), "prior_scale"),
     ],
 )
-def test_errors_name_the_argument(kwargs, match):
+def test_nuts_errors_name_the_field(kwargs, match):
     with pytest.raises(ValueError, match=match):
-        jc.sample_posterior(START, [_creep(20.0, 0)], **kwargs)
+        jc.NUTS(**kwargs)
+
+
+def test_errors_name_the_argument():
+    problem = jc.Problem(START, [_creep(20.0, 0)])
+    with pytest.raises(ValueError, match="start"):
+        jc.sample_posterior(problem, start="fit")
+    with pytest.raises(ValueError, match="per_test"):
+        jc.sample_posterior(jc.Problem(START, problem.tests, per_test=["E1"]))
+    with pytest.raises(TypeError, match="method"):
+        jc.sample_posterior(problem, jc.LeastSquares())
+    with pytest.raises(TypeError, match="problem"):
+        jc.sample_posterior(START, jc.NUTS())
 
 
 def test_fit_command_posterior(tmp_path, posterior):

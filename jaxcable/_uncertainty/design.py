@@ -4,6 +4,7 @@ shrink what a fit or a posterior knows least."""
 import dataclasses
 import json
 import math
+import os
 from collections.abc import Sequence
 
 import equinox as eqx
@@ -17,6 +18,7 @@ from .._files import write_text_atomic
 from .._fit import FitResult, field_at
 from .._models import AbstractCableModel, parameter_info
 from .budget import TestBudget
+from .methods import TestDesign
 from .priors import PRIOR_SCALE
 from .result import Posterior
 
@@ -103,12 +105,13 @@ def knowledge_of(source, noise_mm: float | None) -> Knowledge:
         cov = np.asarray(source.covariance, float) / np.outer(s, s)
     else:
         raise ValueError(
-            "`fit_or_posterior` must be a jaxcable.FitResult or a jaxcable.Posterior, "
+            "`known` must be a jaxcable.FitResult or a jaxcable.Posterior (a test "
+            "that separates two candidates: jaxcable.design_discriminating_test), "
             f"got {type(source).__name__}."
         )
     if fit.per_test:
         raise ValueError(
-            "`fit_or_posterior`: parameters fitted per test cannot be designed for "
+            "`known`: parameters fitted per test cannot be designed for "
             f"({list(fit.per_test)}); fit them shared."
         )
     if noise_mm is None:
@@ -210,6 +213,39 @@ def optimise(grad, design: Design, steps: int, learning_rate: float):
     return best[1], best[2], best[0]
 
 
+def designed_protocol(method: TestDesign, cable: Cable, criterion, variants=(0,)):
+    """Adam on the design variables from each start `variants` (see
+    `Design.start`), the best design kept: `(protocol, cable at its speed, (levels
+    N, holds s, rests s), layout)`.
+
+    `criterion(protocol, cable at its speed) -> (value, trajectory)`, the value to
+    minimise (traceable) and the rate-driven simulation of the protocol, whose
+    duration the next step's ramps assume."""
+    budget = method.budget
+    layout = Layout.of(budget)
+
+    def build(d, ramp_time):
+        return protocol_of(d, layout, budget, cable, ramp_time)
+
+    def loss(d, ramp_time):
+        protocol, c, *_ = build(d, ramp_time)
+        value, traj = criterion(protocol, c)
+        spent = traj.time[-1] - jnp.sum(protocol.duration)
+        return value, spent
+
+    grad = jax.jit(jax.value_and_grad(loss, has_aux=True))
+    best = None
+    for variant in variants:
+        design, ramp_time, value = optimise(
+            grad, Design.start(layout, variant), method.steps, method.learning_rate
+        )
+        if best is None or value < best[0]:
+            best = (value, design, ramp_time)
+    _, design, ramp_time = best
+    protocol, c, *parts = build(design, ramp_time)
+    return protocol, c, parts, layout
+
+
 def standard_protocol(model, cable: Cable, budget: TestBudget, duration: float):
     """Park's standard protocol of the same duration, the designed test's yardstick:
     `PARK_CYCLES` cycles to the budget's largest force at `cable`'s speed (clipped
@@ -231,19 +267,40 @@ def standard_protocol(model, cable: Cable, budget: TestBudget, duration: float):
     return standard, usual
 
 
-def protocol_json(document: dict, path) -> str:
-    """A protocol file's JSON text, written to `path` when it is not None."""
-    text = json.dumps(document, indent=2)
-    if path is not None:
-        write_text_atomic(path, text + "\n")
-    return text
+@dataclasses.dataclass(frozen=True)
+class DesignedProtocol:
+    """What every designed test holds: the protocol, the cable at its speed and the
+    protocol file (see [`jaxcable.DesignedTest`][])."""
+
+    protocol: Protocol
+    cable: Cable
+    document: dict
+
+    def why(self) -> str:
+        """One paragraph: why this test."""
+        raise NotImplementedError
+
+    def to_json(self, path: str | os.PathLike | None = None) -> str:
+        """The protocol file (JSON text), written to `path` when given."""
+        text = json.dumps(self.document, indent=2)
+        if path is not None:
+            write_text_atomic(path, text + "\n")
+        return text
+
+    def with_document(self, cable: Cable, parts, layout: "Layout", id: str):
+        """The same outcome with its protocol file: `parts` the designed
+        `(levels N, holds s, rests s)`, `cable` the cable as given (its speed is
+        this test's)."""
+        document = protocol_document(cable, self.cable.speed, parts, layout, self.why())
+        document["id"] = id
+        return dataclasses.replace(self, document=document)
 
 
-def protocol_document(cable, speed, levels, holds, rests, layout, why: str) -> dict:
+def protocol_document(cable, speed, parts, layout, why: str) -> dict:
     """The protocol file of a design (`jaxcable simulate` runs it): its blocks'
-    levels (N), holds and rests (s), at the crosshead `speed` (m/s)."""
+    `parts`, `(levels N, holds s, rests s)`, at the crosshead `speed` (m/s)."""
     segments = []
-    for f, h, r in zip(levels, holds, rests):
+    for f, h, r in zip(*(np.asarray(x) for x in parts)):
         segments += [
             {"ramp_to_N": round(float(f), 3), "samples": layout.ramp_samples},
             {"hold_s": round(float(h), 3), "samples": layout.hold_samples},
@@ -260,18 +317,14 @@ def protocol_document(cable, speed, levels, holds, rests, layout, why: str) -> d
     }
 
 
-def check_design_arguments(budget: TestBudget, cable: Cable, steps: int) -> None:
+def check_design_arguments(method: TestDesign, cable: Cable) -> None:
     """Raise `ValueError` naming the first bad argument of a design function."""
-    if not isinstance(budget, TestBudget):
-        raise ValueError(
-            f"`budget` must be a jaxcable.TestBudget, got {type(budget).__name__}."
-        )
-    if not isinstance(cable, Cable):
-        raise ValueError(
-            f"`cable` must be a jaxcable.Cable, got {type(cable).__name__}."
-        )
-    if not isinstance(steps, int) or steps < 0:
-        raise ValueError(f"`steps` must be an int >= 0, got {steps!r}.")
+    for name, value, kind in (("method", method, TestDesign), ("cable", cable, Cable)):
+        if not isinstance(value, kind):
+            raise ValueError(
+                f"`{name}` must be a jaxcable.{kind.__name__}, got "
+                f"{type(value).__name__}."
+            )
 
 
 def protocol_of(

@@ -3,35 +3,20 @@ and what it is expected to teach beside Park's standard protocol of the same
 duration."""
 
 import dataclasses
-import os
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 
 from .._cable import Cable
 from .._drive import Protocol, simulate_rate_test
-from .budget import TestBudget
-from .design import (
-    Design,
-    Knowledge,
-    Layout,
-    check_design_arguments,
-    default_targets,
-    information,
-    knowledge_of,
-    log_det_subset,
-    optimise,
-    protocol_document,
-    protocol_json,
-    protocol_of,
-    standard_protocol,
-)
-from .discriminate import DiscriminatingTest, design_discriminating_test
+from .._fit import FitResult
+from . import design as _d
+from .methods import TestDesign
+from .result import Posterior
 
 
 @dataclasses.dataclass(frozen=True)
-class DesignedTest:
+class DesignedTest(_d.DesignedProtocol):
     """The outcome of [`jaxcable.design_test`][].
 
     **Fields:**
@@ -52,9 +37,6 @@ class DesignedTest:
         standard)`.
     """
 
-    protocol: Protocol
-    cable: Cable
-    document: dict
     names: tuple[str, ...]
     targets: tuple[str, ...]
     sd_before: np.ndarray
@@ -106,31 +88,29 @@ class DesignedTest:
             + ")."
         )
 
-    def to_json(self, path: str | os.PathLike | None = None) -> str:
-        """The protocol file (JSON text), written to `path` when given."""
-        return protocol_json(self.document, path)
 
-
-def _precision_after(knowledge: Knowledge, cable: Cable, protocol: Protocol):
+def _precision_after(knowledge: _d.Knowledge, cable: Cable, protocol: Protocol):
     """The information after a rate-driven test: simulate it (its sample times are
     solved), then the Fisher information of it as the fit would see it."""
     traj = simulate_rate_test(knowledge.model, cable, protocol, throw=False)
-    info = information(knowledge, cable, traj.time, protocol.force)
+    info = _d.information(knowledge, cable, traj.time, protocol.force)
     return jnp.asarray(knowledge.precision()) + info, traj
 
 
 def design_test(
-    fit_or_posterior,
+    known: FitResult | Posterior,
+    method: TestDesign,
     *,
-    budget: TestBudget,
     cable: Cable,
     targets=None,
-    steps: int = 40,
-    learning_rate: float = 0.15,
-) -> "DesignedTest | DiscriminatingTest":
+) -> DesignedTest:
     """Design the next test: the protocol that teaches most about the parameters
-    known least, or, after an ambiguous diagnosis, the one that best separates its
-    two leading candidates.
+    known least.
+
+    ```python
+    method = jc.TestDesign(jc.TestBudget(duration_s=1200.0), steps=40)
+    designed = jc.design_test(fit, method, cable=tests[0].cable())
+    ```
 
     **What is known**: a [`jaxcable.FitResult`][] (its fitted model and linearised
     covariance) or a [`jaxcable.Posterior`][] (its median model and the covariance
@@ -152,94 +132,62 @@ def design_test(
     derivatives of its time solve) and the Jacobian; the ramps' duration is
     re-estimated between steps.
 
-    **After a diagnosis**: given a [`jaxcable.Diagnosis`][] (or two fits as a
-    tuple), the test separates its two candidates of lowest ΔBIC instead
-    ([`jaxcable.design_discriminating_test`][], T-optimal); `targets` must then be
-    None.
+    After an ambiguous diagnosis, the test that separates its two leading
+    candidates is [`jaxcable.design_discriminating_test`][]'s.
 
     **Arguments:**
 
-    - `fit_or_posterior`: what is known; or a diagnosis, or two fits.
-    - `budget`: the lab's constraints, a [`jaxcable.TestBudget`][].
+    - `known`: what is known, a [`jaxcable.FitResult`][] or a
+        [`jaxcable.Posterior`][] (without parameters fitted per test).
+    - `method`: a [`jaxcable.TestDesign`][]: the lab's budget (a
+        [`jaxcable.TestBudget`][]) and the optimiser's steps and learning rate.
     - `cable`: the cable to test (length, diameter, breaking load; its speed is
         designed, and is the speed of the standard protocol it is compared with).
     - `targets`: parameter names to learn about; default the least identified one
         and those within a factor 3 of its standard deviation (at most 3).
-    - `steps`: optimiser steps.
-    - `learning_rate`: Adam's step on the unconstrained design variables.
 
     **Returns:**
 
-    A [`DesignedTest`][jaxcable.DesignedTest]: the protocol, its file, and the
-    expected standard deviations with it and with Park's standard protocol (a
-    [`jaxcable.DiscriminatingTest`][] after a diagnosis).
+    A [`jaxcable.DesignedTest`][]: the protocol, its file, and the expected
+    standard deviations with it and with Park's standard protocol.
+
+    **Raises:**
+
+    `ValueError` naming the argument: `known` of another kind (a diagnosis or two
+    fits included), `method`, `cable`, unknown `targets`, a noise that cannot be
+    read from the fit (`budget.noise_mm`).
     """
-    from .._diagnose import Diagnosis
+    _d.check_design_arguments(method, cable)
+    budget = method.budget
+    knowledge = _d.knowledge_of(known, budget.noise_mm)
+    idx = _d.default_targets(knowledge, targets)
 
-    if isinstance(fit_or_posterior, (Diagnosis, tuple, list)):
-        if targets is not None:
-            raise ValueError(
-                "`targets`: a test that separates two candidates has no target "
-                "parameters; leave it None."
-            )
-        return design_discriminating_test(
-            fit_or_posterior,
-            budget=budget,
-            cable=cable,
-            steps=steps,
-            learning_rate=learning_rate,
-        )
-    check_design_arguments(budget, cable, steps)
-    knowledge = knowledge_of(fit_or_posterior, budget.noise_mm)
-    idx = default_targets(knowledge, targets)
-    layout = Layout.of(budget)
-    design = Design.start(layout)
-
-    def build(d, ramp_time):
-        return protocol_of(d, layout, budget, cable, ramp_time)
-
-    def loss(d, ramp_time):
-        protocol, c, *_ = build(d, ramp_time)
+    def criterion(protocol, c):
         precision, traj = _precision_after(knowledge, c, protocol)
-        value = log_det_subset(precision, idx)
-        spent = traj.time[-1] - jnp.sum(protocol.duration)
-        return value, spent
+        return _d.log_det_subset(precision, idx), traj
 
-    grad = jax.jit(jax.value_and_grad(loss, has_aux=True))
-    design, ramp_time, _ = optimise(grad, design, steps, learning_rate)
-    protocol, c, levels, holds, rests = build(design, ramp_time)
+    protocol, c, parts, layout = _d.designed_protocol(method, cable, criterion)
     precision, traj = _precision_after(knowledge, c, protocol)
     before = np.linalg.inv(knowledge.precision())
     after = np.linalg.inv(np.asarray(precision))
     duration = float(traj.time[-1])
-    standard, usual = standard_protocol(knowledge.model, cable, budget, duration)
+    standard, usual = _d.standard_protocol(knowledge.model, cable, budget, duration)
     std_precision, _ = _precision_after(knowledge, usual, standard)
     std_cov = np.linalg.inv(np.asarray(std_precision))
 
     def crit(cov):
         return float(np.linalg.slogdet(cov[np.ix_(idx, idx)])[1])
 
-    names = knowledge.names
-    target_names = tuple(names[i] for i in idx)
     result = DesignedTest(
         protocol=protocol,
         cable=c,
         document={},
-        names=names,
-        targets=target_names,
+        names=knowledge.names,
+        targets=tuple(knowledge.names[i] for i in idx),
         sd_before=np.sqrt(np.diag(before)),
         sd_after=np.sqrt(np.diag(after)),
         sd_standard=np.sqrt(np.diag(std_cov)),
         duration_s=duration,
         criterion=(crit(before), crit(after), crit(std_cov)),
     )
-    document = protocol_document(
-        cable,
-        c.speed,
-        np.asarray(levels),
-        np.asarray(holds),
-        np.asarray(rests),
-        layout,
-        result.why(),
-    )
-    return dataclasses.replace(result, document=document)
+    return result.with_document(cable, parts, layout, "designed-test")

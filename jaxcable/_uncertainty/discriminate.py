@@ -3,39 +3,26 @@ candidate models, `jaxcable.design_discriminating_test`."""
 
 import dataclasses
 import math
-import os
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from .._cable import Cable
-from .._drive import Protocol, simulate_force_history, simulate_rate_test
+from .._drive import simulate_force_history, simulate_rate_test
 from .._fit import FitResult
-from .budget import TestBudget
-from .design import (
-    Design,
-    Knowledge,
-    Layout,
-    check_design_arguments,
-    knowledge_of,
-    optimise,
-    protocol_document,
-    protocol_json,
-    protocol_of,
-    standard_protocol,
-)
+from . import design as _d
+from .methods import TestDesign
 
 
 @dataclasses.dataclass(frozen=True)
-class DiscriminatingTest:
+class DiscriminatingTest(_d.DesignedProtocol):
     """The outcome of [`jaxcable.design_discriminating_test`][].
 
     **Fields:**
 
-    - `protocol`: the designed test, a [`jaxcable.Protocol`][].
-    - `cable`: the cable at the designed crosshead speed.
-    - `document`: the protocol file (a dict; `to_json` writes it).
+    - `protocol`, `cable`, `document`: the designed test, the cable at its
+        crosshead speed and the protocol file, as [`jaxcable.DesignedTest`][]'s.
     - `candidates`: the two candidates' names `(a, b)`.
     - `parameters`: each candidate's number of fitted parameters.
     - `bic_now`: BIC(b) - BIC(a) on the data so far (a diagnosis's training
@@ -52,9 +39,6 @@ class DiscriminatingTest:
     - `noise_m`: the elongation noise the separations are in units of, m.
     """
 
-    protocol: Protocol
-    cable: Cable
-    document: dict
     candidates: tuple[str, str]
     parameters: tuple[int, int]
     bic_now: float
@@ -133,12 +117,8 @@ class DiscriminatingTest:
             f"10-cycle protocol of the same duration: {standard:.1f}."
         )
 
-    def to_json(self, path: str | os.PathLike | None = None) -> str:
-        """The protocol file (JSON text), written to `path` when given."""
-        return protocol_json(self.document, path)
 
-
-def _response(knowledge: Knowledge, cable: Cable, time, force):
+def _response(knowledge: _d.Knowledge, cable: Cable, time, force):
     """The elongations (m) of a force history and their Jacobian in theta."""
 
     def elongation(theta):
@@ -160,7 +140,9 @@ def _lack_of_fit(difference, jac, precision, sigma):
     return difference @ difference / sigma**2 - g @ jnp.linalg.solve(a, g)
 
 
-def separations(first: Knowledge, second: Knowledge, cable: Cable, time, force, sigma):
+def separations(
+    first: _d.Knowledge, second: _d.Knowledge, cable: Cable, time, force, sigma
+):
     """`(T_ab, T_ba)` of one force history (s, N): see `DiscriminatingTest`."""
     ea, ja = _response(first, cable, time, force)
     eb, jb = _response(second, cable, time, force)
@@ -222,15 +204,15 @@ def _leading_pair(source):
 
 
 def design_discriminating_test(
-    candidates,
-    *,
-    budget: TestBudget,
-    cable: Cable,
-    steps: int = 40,
-    learning_rate: float = 0.15,
+    candidates, method: TestDesign, *, cable: Cable
 ) -> DiscriminatingTest:
     """Design the test that best separates two candidate models: after a diagnosis
     that cannot tell its two leading candidates apart, the test to run next.
+
+    ```python
+    method = jc.TestDesign(jc.TestBudget(duration_s=1200.0))
+    separating = jc.design_discriminating_test(diagnosis, method, cable=cable)
+    ```
 
     **The test** is the one of [`jaxcable.design_test`][]: `budget.blocks` blocks
     of a ramp to a load level, a hold, a ramp down and a rest at one crosshead
@@ -247,20 +229,20 @@ def design_discriminating_test(
     its fit's covariance, with the posterior's prior of ln 10 on theta), sigma the
     elongation noise. The design maximises min(T_ab, T_ba) by Adam, the gradient
     through the rate-driven simulation of a (whose sample times both share) and
-    both Jacobians, from three starting designs (the best kept). Expected BIC(wrong) - BIC(true) after the test is the BIC
-    difference so far plus T (see `DiscriminatingTest.expected_delta_bic`).
+    both Jacobians, from three starting designs (the best kept). Expected
+    BIC(wrong) - BIC(true) after the test is the BIC difference so far plus T (see
+    `DiscriminatingTest.expected_delta_bic`).
 
     **Arguments:**
 
     - `candidates`: a [`jaxcable.Diagnosis`][] (its two candidates of lowest
         ΔBIC, fitted on its training data) or two [`jaxcable.FitResult`][] of the
         same tests.
-    - `budget`: the lab's constraints, a [`jaxcable.TestBudget`][] (its `noise_mm`,
-        default the smaller RMS residual of the two fits).
+    - `method`: a [`jaxcable.TestDesign`][]: the lab's budget (a
+        [`jaxcable.TestBudget`][]; its `noise_mm`, default the smaller RMS residual
+        of the two fits) and the optimiser's steps and learning rate.
     - `cable`: the cable to test (length, diameter, breaking load; its speed is
         designed, and is the speed of the standard protocol it is compared with).
-    - `steps`: optimiser steps.
-    - `learning_rate`: Adam's step on the unconstrained design variables.
 
     **Returns:**
 
@@ -272,41 +254,29 @@ def design_discriminating_test(
     `ValueError` naming the argument: fewer than two fitted candidates, a wrong
     type, parameters fitted per test.
     """
-    check_design_arguments(budget, cable, steps)
+    _d.check_design_arguments(method, cable)
+    budget = method.budget
     name_a, fit_a, name_b, fit_b, bic_now = _leading_pair(candidates)
-    first = knowledge_of(fit_a, budget.noise_mm)
-    second = knowledge_of(fit_b, budget.noise_mm)
+    first = _d.knowledge_of(fit_a, budget.noise_mm)
+    second = _d.knowledge_of(fit_b, budget.noise_mm)
     sigma = min(first.noise_m, second.noise_m)
-    layout = Layout.of(budget)
 
-    def build(d, ramp_time):
-        return protocol_of(d, layout, budget, cable, ramp_time)
-
-    def loss(d, ramp_time):
-        protocol, c, *_ = build(d, ramp_time)
+    def criterion(protocol, c):
         traj = simulate_rate_test(first.model, c, protocol, throw=False)
         t_ab, t_ba = separations(first, second, c, traj.time, protocol.force, sigma)
         # A smooth minimum (within about one unit of noise-sum of the smaller).
         low = -jnp.logaddexp(-t_ab, -t_ba)
-        spent = traj.time[-1] - jnp.sum(protocol.duration)
-        return -jnp.log1p(jnp.maximum(low, 0.0)), spent
+        return -jnp.log1p(jnp.maximum(low, 0.0)), traj
 
     # min(T_ab, T_ba) has a kink wherever the two cross, and a design can stall
     # where one of them is flat: three starts, the best kept.
-    grad = jax.jit(jax.value_and_grad(loss, has_aux=True))
-    best = None
-    for variant in range(3):
-        design, ramp_time, value = optimise(
-            grad, Design.start(layout, variant), steps, learning_rate
-        )
-        if best is None or value < best[0]:
-            best = (value, design, ramp_time)
-    _, design, ramp_time = best
-    protocol, c, levels, holds, rests = build(design, ramp_time)
+    protocol, c, parts, layout = _d.designed_protocol(
+        method, cable, criterion, variants=(0, 1, 2)
+    )
     traj = simulate_rate_test(first.model, c, protocol, throw=False)
     duration = float(traj.time[-1])
     found = separations(first, second, c, traj.time, protocol.force, sigma)
-    standard, usual = standard_protocol(first.model, cable, budget, duration)
+    standard, usual = _d.standard_protocol(first.model, cable, budget, duration)
     std_traj = simulate_rate_test(first.model, usual, standard, throw=False)
     baseline = separations(first, second, usual, std_traj.time, standard.force, sigma)
     result = DiscriminatingTest(
@@ -323,14 +293,4 @@ def design_discriminating_test(
         duration_s=duration,
         noise_m=float(sigma),
     )
-    document = protocol_document(
-        cable,
-        c.speed,
-        np.asarray(levels),
-        np.asarray(holds),
-        np.asarray(rests),
-        layout,
-        result.why(),
-    )
-    document["id"] = "discriminating-test"
-    return dataclasses.replace(result, document=document)
+    return result.with_document(cable, parts, layout, "discriminating-test")

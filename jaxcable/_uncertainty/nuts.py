@@ -23,6 +23,7 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
 from jaxtyping import Array, Float, PRNGKeyArray
 
 from .._progress import AbstractProgressMeter, NoProgressMeter
+from .methods import NUTS
 
 
 # Dual averaging (Hoffman & Gelman 2014, Algorithm 5; Stan's constants).
@@ -32,6 +33,10 @@ _KAPPA = 0.75
 # Steps per compiled call: warm-up and sampling loop over chunks of this many
 # steps, so that one compiled program serves every phase and length.
 CHUNK = 25
+# The mean acceptance the step size aims at, and the first step size (in units of
+# the metric).
+TARGET_ACCEPTANCE = 0.8
+INITIAL_STEP = 0.5
 
 
 class _DualAveraging(eqx.Module):
@@ -209,12 +214,7 @@ def run_chains(
     start: Float[Array, "chains p"],
     inverse_mass: np.ndarray,
     key: PRNGKeyArray,
-    num_warmup: int,
-    num_samples: int,
-    *,
-    target: float = 0.8,
-    max_doublings: int = 8,
-    initial_step: float = 0.5,
+    method: NUTS,
     progress_meter: AbstractProgressMeter = NoProgressMeter(),
 ) -> dict:
     """Warm-up and sampling of the chains.
@@ -232,10 +232,10 @@ def run_chains(
     - `start`: each chain's first position.
     - `inverse_mass`: the initial metric, `(p, p)` (the Laplace covariance).
     - `key`: the random key.
-    - `num_warmup`, `num_samples`: steps of each chain.
-    - `target`: the mean acceptance the step size aims at.
-    - `max_doublings`: the largest tree depth of NUTS (2^depth - 1 steps).
-    - `initial_step`: the first step size, in units of the metric.
+    - `method`: the sampler's settings: `num_warmup`, `num_samples` (steps of each
+        chain) and `max_doublings` (the largest tree depth of NUTS, 2^depth - 1
+        steps). The step size aims at the mean acceptance `TARGET_ACCEPTANCE` from
+        `INITIAL_STEP` (in units of the metric).
     - `progress_meter`: how to show progress (one step per chunk).
 
     **Returns:**
@@ -244,7 +244,9 @@ def run_chains(
     phase), `acceptance` (mean), `step_size`, `inverse_mass`, `mean_steps`
     (integration steps per draw).
     """
-    init, run = make_runner(max_doublings)
+    num_warmup, num_samples = method.num_warmup, method.num_samples
+    target = TARGET_ACCEPTANCE
+    init, run = make_runner(method.max_doublings)
     start = _spread(jnp.asarray(start))
     states = init(density, start)
     ok = np.isfinite(np.asarray(states.logdensity))
@@ -257,7 +259,7 @@ def run_chains(
         states = init(density, _spread(jnp.asarray(fixed)))
     chunks = max(2, -(-num_warmup // CHUNK))
     first = chunks // 2
-    dual = _dual_averaging_init(initial_step)
+    dual = _dual_averaging_init(INITIAL_STEP)
     mass = jnp.asarray(inverse_mass)
     keys = jax.random.split(key, chunks + max(1, -(-num_samples // CHUNK)))
     never = jnp.asarray(1.0)

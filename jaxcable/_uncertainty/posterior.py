@@ -1,41 +1,30 @@
 """Bayesian posterior of a model's fitted parameters: `jaxcable.sample_posterior`."""
 
-import math
 import time
 import warnings
-from collections.abc import Mapping, Sequence
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, PRNGKeyArray
+from jaxtyping import Array
 
 from .._fit import (
     FitResult,
     IdentifiabilityWarning,
-    as_test_list,
     field_at,
     fit as least_squares,
     make_problem,
 )
 from .._io import force_noise
-from .._models import AbstractCableModel
-from .._progress import AbstractProgressMeter, NoProgressMeter
+from .._problem import LeastSquares, Problem
+from .._progress import AbstractProgressMeter, NoProgressMeter, check_progress_meter
 from .diagnostics import bulk_ess, split_rhat
+from .methods import NUTS
 from .mode import posterior_mode
 from .nuts import run_chains
-from .priors import (
-    PRIOR_SCALE,
-    bound_of,
-    log_prior,
-    prior_precision,
-    to_unconstrained,
-)
+from .priors import bound_of, log_prior, prior_precision, to_unconstrained
 from .result import Posterior
-
-
-NOISE_MODELS = ("fitted", "robust")
 
 
 def _natural_derivative(transform: str, x: float, scale: float, bound: float):
@@ -50,24 +39,33 @@ def _natural_derivative(transform: str, x: float, scale: float, bound: float):
     return (bound**2 - x**2) / bound  # tanh: x = bound tanh(u)
 
 
-def _to_u(problem, values: np.ndarray, model) -> np.ndarray:
-    """The unconstrained vector of natural `values` (laid out as the problem's u),
-    with the problem's scales (those of the user's start) and each tanh bound read
-    from `values` or `model`."""
-    layout = problem.layout
+def _bounds(layout, values: np.ndarray, model) -> list:
+    """Each parameter's tanh bound (None for another transform), read from the
+    natural `values` (laid out as the problem's u) where the bound is fitted, else
+    from `model`."""
     by_name = dict(zip(layout.names, values))
     out = []
-    for i, (name, transform) in enumerate(zip(layout.names, layout.transforms)):
+    for transform in layout.transforms:
         other = bound_of(transform)
-        bound = None
-        if other is not None:
-            bound = by_name.get(other, float(field_at(model, other)))
-        out.append(
-            to_unconstrained(
-                transform, float(values[i]), float(problem.scales[i]), bound
+        if other is None:
+            out.append(None)
+        else:
+            out.append(by_name.get(other, float(field_at(model, other))))
+    return out
+
+
+def _to_u(lsq, values: np.ndarray, model) -> np.ndarray:
+    """The unconstrained vector of natural `values` (laid out as the least-squares
+    problem's u), with its scales (those of the user's start)."""
+    bounds = _bounds(lsq.layout, values, model)
+    return np.array(
+        [
+            to_unconstrained(t, float(x), float(scale), bound)
+            for t, x, scale, bound in zip(
+                lsq.layout.transforms, values, lsq.scales, bounds
             )
-        )
-    return np.array(out)
+        ]
+    )
 
 
 def _robust_noise(data) -> np.ndarray:
@@ -85,24 +83,18 @@ def _robust_noise(data) -> np.ndarray:
     return np.array(out)
 
 
-def _laplace(fit_result: FitResult, problem, u_hat, prior_scale) -> np.ndarray:
+def _laplace(fit_result: FitResult, lsq, prior_scale) -> np.ndarray:
     """The covariance of u of the least-squares fit (the delta method undone), with
     the prior's curvature added to its precision: the sampler's first metric."""
-    layout = problem.layout
+    layout = lsq.layout
     values = np.asarray(fit_result.values, float)
-    by_name = dict(zip(layout.names, values))
-    g = []
-    for i, (name, transform) in enumerate(zip(layout.names, layout.transforms)):
-        other = bound_of(transform)
-        bound = None
-        if other is not None:
-            bound = by_name.get(other, float(field_at(fit_result.model, other)))
-        g.append(
-            _natural_derivative(
-                transform, by_name[name], float(problem.scales[i]), bound
-            )
-        )
-    g = np.array(g)
+    bounds = _bounds(layout, values, fit_result.model)
+    g = np.array(
+        [
+            _natural_derivative(t, float(x), float(scale), bound)
+            for t, x, scale, bound in zip(layout.transforms, values, lsq.scales, bounds)
+        ]
+    )
     cov = np.asarray(fit_result.covariance, float) / np.outer(g, g)
     if not np.all(np.isfinite(cov)):
         cov = np.diag(np.full(len(g), prior_scale**2))
@@ -156,23 +148,62 @@ class LogPosterior(eqx.Module):
         return loglik + log_prior(transforms, self.center, self.prior_scale, u)
 
 
+def _start_fit(problem: Problem, start: FitResult | None, labels) -> FitResult:
+    """`start`, or the least-squares fit of `problem` (default method) run here;
+    checked against the sampled parameters `labels`."""
+    if start is None:
+        # As the command line reports it, identifiability shows in the posterior.
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", IdentifiabilityWarning)
+            start = least_squares(problem, LeastSquares(), throw=False)
+    if not isinstance(start, FitResult) or tuple(start.names) != labels:
+        got = start.names if isinstance(start, FitResult) else type(start).__name__
+        raise ValueError(
+            f"`start` must be a FitResult of the parameters {list(labels)}, got {got}."
+        )
+    if not np.all(np.isfinite(np.asarray(start.values, float))):
+        raise ValueError(
+            "`start`: the least-squares fit failed (non-finite values); give start "
+            "values from which `jaxcable.fit` converges."
+        )
+    return start
+
+
+def _chain_starts(density, lsq, start: FitResult, method: NUTS, key) -> tuple:
+    """`(positions, metric)`: the chains' first positions in u (the first at the
+    posterior's mode, the others at draws of its Laplace approximation) and the
+    first metric (that approximation's covariance)."""
+    u_hat = _to_u(lsq, np.asarray(start.values, float), start.model)
+    cov = _laplace(start, lsq, float(method.prior_scale))
+    u_hat, cov = posterior_mode(density, u_hat, cov)
+    z = np.asarray(jax.random.normal(key, (method.num_chains, len(u_hat))))
+    # A draw outside the model's domain is moved to a valid start by run_chains.
+    positions = u_hat + z @ np.linalg.cholesky(cov).T
+    positions[0] = u_hat
+    return positions, cov
+
+
+def _checked(problem, method, progress_meter) -> AbstractProgressMeter:
+    if not isinstance(problem, Problem):
+        raise TypeError(
+            f"`problem` must be a jaxcable.Problem, got {type(problem).__name__}."
+        )
+    if problem.per_test:
+        raise ValueError(
+            "`problem.per_test`: parameters fitted per test are not sampled "
+            f"({list(problem.per_test)}); sample a problem without them."
+        )
+    if not isinstance(method, NUTS):
+        raise TypeError(f"`method` must be a jaxcable.NUTS, got {method!r}.")
+    return check_progress_meter(progress_meter, NoProgressMeter())
+
+
 def sample_posterior(
-    model: AbstractCableModel,
-    tests,
+    problem: Problem,
+    method: NUTS = NUTS(),
     *,
-    fit: Sequence[str] | None = None,
-    drive="auto",
-    transforms: Mapping[str, str] | None = None,
-    covariate: str | None = None,
-    noise: str = "fitted",
-    num_samples: int = 500,
-    num_chains: int = 4,
-    num_warmup: int = 500,
-    key: PRNGKeyArray | None = None,
     start: FitResult | None = None,
-    prior_scale: float = PRIOR_SCALE,
-    max_doublings: int = 8,
-    progress_meter: AbstractProgressMeter = NoProgressMeter(),
+    progress_meter: AbstractProgressMeter | None = None,
 ) -> Posterior:
     """Sample the Bayesian posterior of a model's fitted parameters by NUTS.
 
@@ -180,8 +211,8 @@ def sample_posterior(
     drive, its residual is the model minus the measured scored channel, and the
     residuals of test i are independent normal with standard deviation sigma_i.
 
-    **Noise model** (`noise`): `"fitted"` (default) treats each test's sigma_i as
-    unknown, with the scale-invariant prior 1 / sigma_i, and integrates it out
+    **Noise model** (`method.noise`): `"fitted"` (default) treats each test's sigma_i
+    as unknown, with the scale-invariant prior 1 / sigma_i, and integrates it out
     exactly: test i contributes SSR_i^(-n_i / 2) (n_i fitted samples), so each test
     weighs by its own residual level, whatever the scored channel. `"robust"` fixes
     sigma_i at the robust estimate of the scored channel's noise from second
@@ -190,11 +221,11 @@ def sample_posterior(
 
     **Priors**, from each parameter's declared domain, on the unconstrained scale u
     the fit solves on: a positive parameter (log scale) is log-normal with median
-    the start value in `model` and log standard deviation `prior_scale` (default
-    ln 10), likewise x - 1 for a parameter > 1 and x / |start| for a linear one; a
-    parameter bounded by another (|x| < bound, tanh scale) is uniform on its
-    interval. The start values are the prior's centre, not the fit's optimum, so the
-    data are not used twice.
+    the start value in `problem.model` and log standard deviation
+    `method.prior_scale` (default ln 10), likewise x - 1 for a parameter > 1 and
+    x / |start| for a linear one; a parameter bounded by another (|x| < bound, tanh
+    scale) is uniform on its interval. The start values are the prior's centre, not
+    the fit's optimum, so the data are not used twice.
 
     **Sampler.** BlackJAX's NUTS kernel (multinomial, iterative), the chains vmapped
     in one compiled program (laid out over the devices when there are several: see
@@ -202,28 +233,24 @@ def sample_posterior(
     simulation in forward mode. The chains start at the posterior's mode (Newton on
     the log density from the least-squares fit, whose Laplace covariance in u, the
     prior's curvature added, whitens it) and at draws of the Laplace approximation
-    there (the inverse Hessian at the mode), which is also the first dense metric; the warm-up adapts the step size by dual
-    averaging (target acceptance 0.8), re-estimates the dense metric from the
-    chains' draws half-way, and adapts the step size again. R-hat and the effective
-    sample size per parameter are the rank-normalised split R-hat and bulk ESS of
-    Vehtari et al. (2021).
+    there (the inverse Hessian at the mode), which is also the first dense metric;
+    the warm-up adapts the step size by dual averaging (target acceptance 0.8),
+    re-estimates the dense metric from the chains' draws half-way, and adapts the
+    step size again. R-hat and the effective sample size per parameter are the
+    rank-normalised split R-hat and bulk ESS of Vehtari et al. (2021).
 
     **Arguments:**
 
-    - `model`: the model and the start values (the prior's centre) of the fitted
-        parameters; the others are fixed at its values.
-    - `tests`, `fit`, `drive`, `transforms`, `covariate`: as in [`jaxcable.fit`][]
-        (parameters fitted per test are not sampled).
-    - `noise`: `"fitted"` or `"robust"` (see above).
-    - `num_samples`: draws kept per chain.
-    - `num_chains`: chains (>= 2 for R-hat).
-    - `num_warmup`: warm-up steps per chain (rounded up to a multiple of 25).
-    - `key`: a `jax.random` key; default `jax.random.key(0)`.
-    - `start`: a least-squares [`jaxcable.FitResult`][] of the same model, tests and
-        `fit` to start from; default: `jaxcable.fit` is run here.
-    - `prior_scale`: the prior standard deviation on the unconstrained scale (> 0).
-    - `max_doublings`: the largest NUTS tree depth (trajectories of at most
-        2^depth - 1 steps).
+    - `problem`: a [`jaxcable.Problem`][]: its model holds the start values (the
+        prior's centre) of the fitted parameters and fixes the others; its tests,
+        `fit`, `transforms`, `drive` and `covariate` are read as
+        [`jaxcable.fit`][] reads them. Its `per_test` must be empty (parameters
+        fitted per test are not sampled).
+    - `method`: a [`jaxcable.NUTS`][]: the noise model, the prior's width and the
+        sampler's settings (draws, chains, warm-up, tree depth, key).
+    - `start`: a least-squares [`jaxcable.FitResult`][] of the same problem to start
+        from; default: [`jaxcable.fit`][] is run here ([`jaxcable.LeastSquares`][]'s
+        defaults).
     - `progress_meter`: how to show progress (a [`jaxcable.TextProgressMeter`][]
         draws a bar of the chains' chunks of 25 steps); default none.
 
@@ -234,84 +261,35 @@ def sample_posterior(
 
     **Raises:**
 
-    `ValueError` naming the argument: as [`jaxcable.fit`][] for the model and tests;
-    a bad `noise`, count, `prior_scale`, or a `start` whose parameters differ.
+    `TypeError` naming `problem` or `method` of another type; `ValueError` naming
+    the argument: as [`jaxcable.fit`][] for the model and tests, `problem.per_test`
+    not empty, a `start` whose parameters differ or whose fit failed.
     """
-    if noise not in NOISE_MODELS:
-        raise ValueError(f"`noise` must be one of {NOISE_MODELS}, got {noise!r}.")
-    for name, value, low in (
-        ("num_samples", num_samples, 4),
-        ("num_chains", num_chains, 1),
-        ("num_warmup", num_warmup, 1),
-        ("max_doublings", max_doublings, 1),
-    ):
-        if not isinstance(value, int) or isinstance(value, bool) or value < low:
-            raise ValueError(f"`{name}` must be an int >= {low}, got {value!r}.")
-    if not (isinstance(prior_scale, (int, float)) and 0 < prior_scale < math.inf):
-        raise ValueError(
-            f"`prior_scale` must be a finite number > 0, got {prior_scale!r}."
-        )
-    if key is None:
-        key = jax.random.key(0)
+    meter = _checked(problem, method, progress_meter)
+    key = jax.random.key(0) if method.key is None else method.key
     began = time.perf_counter()
-    test_list = as_test_list(tests)
-    problem, center = make_problem(
-        model, test_list, fit, None, transforms, drive, covariate
+    lsq, center = make_problem(
+        problem.model,
+        list(problem.tests),
+        problem.fit,
+        None,
+        problem.transform_map or None,
+        problem.drive,
+        problem.covariate,
     )
-    layout = problem.layout
-    if start is None:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", IdentifiabilityWarning)
-            start = least_squares(
-                model,
-                test_list,
-                fit=fit,
-                transforms=transforms,
-                drive=drive,
-                covariate=covariate,
-                throw=False,
-            )
-    if not isinstance(start, FitResult) or tuple(start.names) != layout.labels:
-        got = start.names if isinstance(start, FitResult) else type(start).__name__
-        raise ValueError(
-            f"`start` must be a FitResult of the parameters {list(layout.labels)}, "
-            f"got {got}."
-        )
-    values = np.asarray(start.values, float)
-    if not np.all(np.isfinite(values)):
-        raise ValueError(
-            "`start`: the least-squares fit failed (non-finite values); give start "
-            "values from which `jaxcable.fit` converges."
-        )
-    u_hat = _to_u(problem, values, start.model)
-    sigma = jnp.asarray(_robust_noise(problem.data))
+    layout = lsq.layout
+    start = _start_fit(problem, start, layout.labels)
+    sigma = jnp.asarray(_robust_noise(lsq.data))
     density = LogPosterior(
-        problem, sigma, jnp.asarray(center), noise, float(prior_scale)
+        lsq, sigma, jnp.asarray(center), method.noise, float(method.prior_scale)
     )
-    cov = _laplace(start, problem, u_hat, float(prior_scale))
-    u_hat, cov = posterior_mode(density, u_hat, cov)
     key_start, key_run = jax.random.split(key)
-    z = np.asarray(jax.random.normal(key_start, (num_chains, len(u_hat))))
-    # The first chain starts at the mode, the others at draws of the Laplace
-    # approximation there (one outside the model's domain is moved to the mode).
-    positions = u_hat + z @ np.linalg.cholesky(cov).T
-    positions[0] = u_hat
-    run = run_chains(
-        density,
-        jnp.asarray(positions),
-        cov,
-        key_run,
-        num_warmup,
-        num_samples,
-        max_doublings=max_doublings,
-        progress_meter=progress_meter,
-    )
+    positions, cov = _chain_starts(density, lsq, start, method, key_start)
+    run = run_chains(density, jnp.asarray(positions), cov, key_run, method, meter)
     draws_u = run["draws"]
     flat = draws_u.reshape(-1, draws_u.shape[-1])
-    natural = np.asarray(_to_natural(problem, jnp.asarray(flat))).reshape(draws_u.shape)
+    natural = np.asarray(_to_natural(lsq, jnp.asarray(flat))).reshape(draws_u.shape)
     p = natural.shape[-1]
-    rhat = np.array([split_rhat(draws_u[:, :, k]) for k in range(p)])
-    ess = np.array([bulk_ess(draws_u[:, :, k]) for k in range(p)])
     return Posterior(
         model=start.model,
         names=layout.labels,
@@ -319,14 +297,14 @@ def sample_posterior(
         samples=natural,
         unconstrained=draws_u,
         transforms=layout.transforms,
-        rhat=rhat,
-        ess=ess,
+        rhat=np.array([split_rhat(draws_u[:, :, k]) for k in range(p)]),
+        ess=np.array([bulk_ess(draws_u[:, :, k]) for k in range(p)]),
         divergences=int(run["divergent"]),
         acceptance=run["acceptance"],
         step_size=run["step_size"],
         mean_steps=run["mean_steps"],
-        noise=noise,
-        noise_sd=None if noise == "fitted" else np.asarray(sigma),
+        noise=method.noise,
+        noise_sd=None if method.noise == "fitted" else np.asarray(sigma),
         fit=start,
         seconds=time.perf_counter() - began,
     )
