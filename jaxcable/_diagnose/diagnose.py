@@ -36,7 +36,7 @@ pipeline of stages (`stages.py`) over one round state:
 6. discovery (`discover.py`), when the catalogue does not explain the residual;
 7. the rounds (`rounds.py`): after a cause is named, the stages again around the
    extended model, until nothing is left to name; then each earlier cause is tried
-   out of the final model (`prune.py`).
+   out of the final model.
 """
 
 import dataclasses
