@@ -33,6 +33,7 @@ from .protocol import (
 )
 from .scan import Solve as Solve
 from .simulate import (
+    Simulation as Simulation,
     check_history as check_history,
     simulate_elongation_history as simulate_elongation_history,
     simulate_force_history as simulate_force_history,

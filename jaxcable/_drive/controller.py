@@ -134,6 +134,9 @@ class ControllerState(eqx.Module):
     (for 8 cables in float64: 3 arrays). Integer fields (the branch, the result) are
     stored as floats, exactly (the float format holds small integers exactly).
 
+    `per_cable` (static) says whether the cables' model carries one parameter set
+    per cable (see [`jaxcable.controller_init`][]).
+
     **Properties:** `cables` (the stacked [`jaxcable.states.CableState`][], fields of shape
     `(n, ...)`), `time` (s), `forces` (N), `strain`, `result` (one
     [`jaxcable.RESULTS`][] per cable), `num_cables`.
@@ -143,6 +146,7 @@ class ControllerState(eqx.Module):
     treedef: Any = eqx.field(static=True)
     shapes: tuple[tuple[int, ...], ...] = eqx.field(static=True)
     dtypes: tuple[str, ...] = eqx.field(static=True)
+    per_cable: bool = eqx.field(default=False, static=True)
 
     @property
     def num_cables(self) -> int:
@@ -183,7 +187,7 @@ class ControllerState(eqx.Module):
         return self.cables.result
 
 
-def _pack(states: CableState) -> ControllerState:
+def _pack(states: CableState, per_cable: bool) -> ControllerState:
     leaves, treedef = jtu.tree_flatten(states)
     n = jnp.shape(states.time)[0]
     dtype = states.time.dtype
@@ -195,6 +199,7 @@ def _pack(states: CableState) -> ControllerState:
         treedef=treedef,
         shapes=tuple(tuple(jnp.shape(x)[1:]) for x in leaves),
         dtypes=tuple(jnp.dtype(x.dtype).name for x in leaves),
+        per_cable=per_cable,
     )
 
 
@@ -273,7 +278,8 @@ def controller_init(
     - `cables`: a [`jaxcable.Cable`][] whose `length` has shape `(n,)` (the other
         fields `(n,)` or scalars, broadcast).
     - `time`: the time of the initial state, s.
-    - `per_cable`: whether `model` carries one parameter set per cable.
+    - `per_cable`: whether `model` carries one parameter set per cable (static);
+        the state remembers it for [`jaxcable.controller_step`][].
 
     **Returns:**
 
@@ -285,7 +291,7 @@ def controller_init(
         time = _checks_time(time)
     cables = _broadcast_cables(cables, n)
     states = jax.vmap(init_state, in_axes=(axis, 0, None))(model, cables, time)
-    return _pack(states)
+    return _pack(states, per_cable)
 
 
 def _checks_time(time):
@@ -303,7 +309,6 @@ def controller_step(
     time: Float[ArrayLike, ""],
     forces: Float[ArrayLike, " n"],
     *,
-    per_cable: bool = False,
     throw: bool = True,
 ) -> tuple[ControllerState, Float[Array, " n"]]:
     """Advance a set of cables by one time-stamped sample of their forces and return
@@ -326,8 +331,8 @@ def controller_step(
     **Arguments:**
 
     - `model`: any [`jaxcable.AbstractCableModel`][], shared by the cables, or one
-        parameter set per cable with `per_cable=True` (every array with a leading
-        axis of size n).
+        parameter set per cable where the state was made with `per_cable=True`
+        ([`jaxcable.controller_init`][]; every array with a leading axis of size n).
     - `cables`: a [`jaxcable.Cable`][] with `length` of shape `(n,)` (the other fields
         `(n,)` or scalars).
     - `state`: the [`jaxcable.states.ControllerState`][] after the previous sample.
@@ -336,7 +341,6 @@ def controller_step(
         0 <= force <= `cables.breaking_load`. The force is linear between samples
         and used as measured, with no deadband: the elongations are those of
         [`jaxcable.simulate_force_history`][] on the same history.
-    - `per_cable`: whether `model` carries one parameter set per cable (static).
     - `throw`: raise at runtime when a cable's result is not successful (default),
         e.g. `RESULTS.strain_beyond_break` for a cable strained beyond its
         `breaking_strain`. With `throw=False` the failures stay in `state.result`,
@@ -378,8 +382,8 @@ def controller_step(
     scanned inputs; `jax.grad` of a loss of the commands goes through the whole loop.
     """
     n = _num_cables(cables)
-    axis = _model_axes(model, n, per_cable)
     _check_state(state, n)
+    axis = _model_axes(model, n, state.per_cable)
     if _checks.is_concrete(time):
         time = _checks_time(time)
         if _checks.is_concrete(state.packed):
@@ -422,4 +426,4 @@ def controller_step(
         bad = result != RESULTS.successful
         first = jtu.tree_map(lambda v: v[jnp.argmax(bad)], result)
         elongation = first.error_if(elongation, jnp.any(bad))
-    return _pack(new), elongation
+    return _pack(new, state.per_cable), elongation

@@ -164,6 +164,37 @@ def _time_residual(dt, problem: _TimeProblem):
     return residual, (model_state, parts)
 
 
+def _first_guess(model, cable, state: CableState, sample: RateSample):
+    """The guess of a sample's time that starts a ramp: the time the instantaneous
+    strain step alone takes at speed v; on a hold, its duration."""
+    force, branch, duration = sample.force, sample.direction, sample.duration
+    zero = jnp.zeros_like(duration)
+    _, parts0 = model.advance(state.model_state, cable, zero, force, branch)
+    jump = jnp.abs(parts0.total - state.strain) / cable.strain_rate
+    # In the dtype of the carry (a float32 cable with float64 parameters computes
+    # the jump in float64).
+    return jnp.where(branch != 0, jump, duration).astype(state.last_step.dtype)
+
+
+def _rate_guess(model, cable, state: CableState, sample: RateSample, solve: Solve):
+    """The initial guess of a sample's time, s. Inside a ramp, the previous step's
+    duration (samples are close and creep is smooth, so two Newton steps suffice);
+    at the start of a ramp or on a hold, `_first_guess`; to replay, the known root.
+    `continues` comes from the protocol, so when one protocol is shared by a
+    vmapped batch the cond stays a branch and the first-sample guess costs nothing
+    on the other samples."""
+    if solve.how == REPLAY:
+        return solve.root
+    if solve.how == FAST and not branches_are_cheap():
+        first = _first_guess(model, cable, state, sample)
+        return jnp.where(sample.continues, state.last_step, first)
+    return jax.lax.cond(
+        sample.continues,
+        lambda: state.last_step,
+        lambda: _first_guess(model, cable, state, sample),
+    )
+
+
 class RateDrive(AbstractDrive):
     """A rate-driven test: the crosshead moves at `cable.speed` along each ramp, so
     the strain follows eps_kin(t) = eps_start +/- (v / L0) (t - t_start) (Park Eq. 6),
@@ -190,27 +221,7 @@ class RateDrive(AbstractDrive):
 
     def step(self, model, cable, state, sample: RateSample, solve: Solve):
         force, branch, duration = sample.force, sample.direction, sample.duration
-
-        # Initial guess. Inside a ramp, the previous step's duration (samples are
-        # close and creep is smooth, so two Newton steps suffice). At the start of a
-        # ramp, the time the instantaneous strain step alone takes at speed v. On a
-        # hold, its duration. `continues` comes from the protocol, so when one
-        # protocol is shared by a vmapped batch the cond stays a branch and the
-        # first-sample guess costs nothing on the other samples.
-        def first_guess():
-            zero = jnp.zeros_like(duration)
-            _, parts0 = model.advance(state.model_state, cable, zero, force, branch)
-            jump = jnp.abs(parts0.total - state.strain) / cable.strain_rate
-            # In the dtype of the carry (a float32 cable with float64 parameters
-            # computes the jump in float64).
-            return jnp.where(branch != 0, jump, duration).astype(state.last_step.dtype)
-
-        if solve.how == REPLAY:
-            guess = solve.root
-        elif solve.how == FAST and not branches_are_cheap():
-            guess = jnp.where(sample.continues, state.last_step, first_guess())
-        else:
-            guess = jax.lax.cond(sample.continues, lambda: state.last_step, first_guess)
+        guess = _rate_guess(model, cable, state, sample, solve)
         limit = strain_limit(model)
         # Along a loading ramp the crosshead overtakes the model strain (slope < 0 at
         # the root); along an unloading ramp the other way round; a hold is linear in

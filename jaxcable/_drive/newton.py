@@ -10,16 +10,16 @@ import jax
 import jax.numpy as jnp
 import optimistix as optx
 from jax.ad_checkpoint import checkpoint_name
-from jaxtyping import Array, Bool, Float, Int
+from jaxtyping import Array, Bool, Float
 
-from .bracket import Bracket
 from .optimistix_root import optimistix_root
-from .root_derivatives import (
-    aux_at_root,
-    evaluate_where,
-    implicit_root,
-    inexact,
-    loop_tied,
+from .root_derivatives import aux_at_root, evaluate_where, implicit_root
+from .root_solver import (
+    BracketBisection,
+    NewtonSteps,
+    RootProblem,
+    iterate,
+    jvp_with_aux,
 )
 
 
@@ -33,9 +33,9 @@ class Newton(eqx.Module):
     `unrolled` Newton steps, with no loop and no branch (one kernel per step,
     vectorised across a batch); a step converges where its residual is within
     `tol`, or where the residual after it is predicted so from two contracting
-    steps (`_converged`). Only where that did not happen does the robust path take
-    over: Newton's method in a `lax.while_loop` up to `max_steps`, then a bracket
-    search and bisection (`root_scalar`). Derivatives are taken by the implicit
+    steps (`root_solver.converged`). Only where that did not happen does the robust
+    path take over: Newton's method in a `lax.while_loop` up to `max_steps`, then a
+    bracket search and bisection (`root_solver.BracketBisection`). Derivatives are taken by the implicit
     function theorem at each sample's root (`root_derivatives.implicit_root`),
     never through the iterations.
 
@@ -118,35 +118,10 @@ def branches_are_cheap() -> bool:
     return jax.default_backend() == "cpu"
 
 
-def _converged(previous, residual, plain, tol):
-    """Whether a Newton iterate with `residual` is converged: within `tol`, or
-    predicted within it after the refinement step that follows (a `plain` Newton
-    step). Newton's error squares each step, r_next ~ C r^2 with C ~ r / previous^2
-    from the residual before (`previous`); the prediction is trusted only where the
-    two steps contract (|r| below a tenth of |previous|), and asked to be a tenth
-    of `tol`. The refined root is then accurate to the tolerance, and fn's output
-    there follows to the same order (`root_derivatives.aux_at_root`): a sample
-    converges in one evaluation fewer."""
-    last = jnp.abs(residual)
-    ratio = last / jnp.abs(previous)
-    contracts = (ratio <= 0.1) & jnp.isfinite(previous) & (previous != 0)
-    predicted = last * ratio * ratio
-    return (last <= tol) | (plain & contracts & (predicted <= 0.1 * tol))
-
-
 # How `root_scalar` solves: the robust path (loops, bracket, bisection); the fixed
 # steps of a first pass; or the replay of a root already known (its derivatives and
 # fn's output there).
 ROBUST, FAST, REPLAY = "robust", "fast", "replay"
-
-
-# Bisection halves the bracket each step: 100 steps take a bracket of 1e7 s (or N)
-# to below float64 resolution.
-_BISECTION_STEPS = 100
-# The bracket search of a failed solve spans lower + growth * (2**k - 1) up to this
-# k: 2**60 growths is 1e12 crosshead strains (a loading time) or 1e12 breaking
-# loads (a force).
-_SEARCH_STEPS = 60
 
 
 class RootResult(eqx.Module):
@@ -160,35 +135,6 @@ class RootResult(eqx.Module):
     converged: Bool[Array, ""]
     no_root: Bool[Array, ""]
     aux: Any = None
-
-
-# The phases of a lane in `root_scalar`'s loop: Newton's method, then, only where it
-# failed, the bracket search (`_SEARCH`) and bisection, then done.
-_NEWTON, _SEARCH, _BISECT, _DONE = 0, 1, 2, 3
-
-
-class _SolveState(eqx.Module):
-    """The carry of `root_scalar`'s loop, one lane.
-
-    Newton's method: the next iterate `y`, the residual and the `slope` at the
-    previous one, whether that iterate `converged` (`_converged`), whether the
-    iterate is `stuck` at `lower`, and the Newton `steps` taken. The fallback: the step `k` of the bracket
-    search or of the bisection, and the last point that it evaluated (`y_end`, with
-    residual `r_end`). Both: the `bracket` of all points evaluated and the lane's
-    `phase`.
-    """
-
-    y: Float[Array, ""]
-    residual: Float[Array, ""]
-    slope: Float[Array, ""]
-    bracket: Bracket
-    converged: Bool[Array, ""]
-    stuck: Bool[Array, ""]
-    steps: Int[Array, ""] | int
-    phase: Int[Array, ""]
-    k: Int[Array, ""]
-    y_end: Float[Array, ""]
-    r_end: Float[Array, ""]
 
 
 def root_scalar(
@@ -270,213 +216,27 @@ def root_scalar(
             "`solver` must be a jaxcable.Newton or an optimistix root finder, got "
             f"{type(solver).__name__}."
         )
-
-    tol = solver.tol
-    live = jnp.ones_like(guess, dtype=bool) if active is None else active
-    top = jnp.inf if upper is None else jax.lax.stop_gradient(upper)
-    lower = jax.lax.stop_gradient(lower)
-    growth = None if growth is None else jax.lax.stop_gradient(growth)
-
-    def newton_step(y, r, slope):
-        # The next iterate from the residual `r` and the `slope` at `y`.
-        step = r / jnp.where(slope == 0, 1.0, slope)
-        ok = (slope != 0) & jnp.isfinite(step)
-        if slope_sign is None:
-            # A flat or non-finite slope gives no step; the sample is then reported
-            # unconverged instead of carrying a NaN.
-            y_new = jnp.where(ok, y - step, y)
-        else:
-            ok = ok & (slope * slope_sign > 0)
-            y_new = jnp.where(ok, y - step, 2 * y + growth)
-        # An iterate that has converged takes one more Newton step as a refinement
-        # (what keeps float32 times accurate over thousands of samples) only where
-        # that step is small (below 1e-3 of the iterate plus 1e3 `growth`, the
-        # scale of the search: a crosshead strain of 1e-3, or 1e-3 of the breaking
-        # load): where the slope is nearly flat (at 0 N under
-        # hardening, a slope of 1e-18 turns a residual of 1e-13 into a step of
-        # 1e5 N) the converged iterate is the answer.
-        small = 1e-3 * jnp.abs(y) + (0.0 if growth is None else 1e3 * growth)
-        refine = ok & (jnp.abs(step) <= small)
-        y_new = jnp.where(jnp.abs(r) <= tol, jnp.where(refine, y - step, y), y_new)
-        y_new = jnp.minimum(jnp.maximum(y_new, lower), top)
-        # At `lower` and already past the root (or, without `slope_sign`, stepping
-        # below `lower` again), the root is below `lower`: stop instead of
-        # repeating the step.
-        if slope_sign is None:
-            stuck = (y <= lower) & (y_new <= lower)
-        else:
-            stuck = (y <= lower) & (r * slope_sign > 0)
-        # A plain Newton step: no safeguard and no bound changed it.
-        plain = ok & (y_new == y - step)
-        return y_new, stuck, plain
-
-    def newton_on(s: _SolveState):
-        return (s.steps < solver.max_steps) & live & ~(s.converged | s.stuck)
-
-    def newton(s: _SolveState, f, with_aux: bool = False):
-        # With `with_aux`, also fn's auxiliary output at the evaluated point and its
-        # derivative in y (integer and boolean outputs: zeros of their own dtype).
-        if with_aux:
-            (r, aux), (slope, aux_t) = jax.jvp(f, (s.y,), (jnp.ones_like(s.y),))
-            aux_t = jax.tree_util.tree_map(
-                lambda a, t: t if inexact(a) else jnp.zeros_like(a), aux, aux_t
-            )
-        else:
-            r, slope = jax.jvp(lambda y: f(y)[0], (s.y,), (jnp.ones_like(s.y),))
-        y, stuck, plain = newton_step(s.y, r, slope)
-        bracket = s.bracket.see(s.y, r)
-        converged = _converged(s.residual, r, plain, tol)
-        new = eqx.tree_at(
-            lambda s: (
-                s.y,
-                s.residual,
-                s.slope,
-                s.bracket,
-                s.converged,
-                s.stuck,
-                s.steps,
-            ),
-            s,
-            (y, r, slope, bracket, converged, stuck, s.steps + 1),
-        )
-        return (new, (s.y, aux, aux_t)) if with_aux else new
-
-    def settle(s: _SolveState) -> _SolveState:
-        # Move each lane of the fallback on to its next phase once its current one
-        # is over (possibly through both at once): the search ends with a bracket or
-        # after `_SEARCH_STEPS`; bisection converged, out of steps, or at once where
-        # no bracket was found (no root).
-        phase, k, r_end = s.phase, s.k, s.r_end
-        if growth is None:
-            leave = phase == _SEARCH
-        else:
-            searching = (k <= _SEARCH_STEPS) & ~s.bracket.found
-            leave = (phase == _SEARCH) & ~searching
-        phase = jnp.where(leave, _BISECT, phase)
-        k = jnp.where(leave, 0, k)
-        r_end = jnp.where(leave, jnp.inf, r_end)
-        bisecting = (k < _BISECTION_STEPS) & s.bracket.found & ~(jnp.abs(r_end) <= tol)
-        phase = jnp.where((phase == _BISECT) & ~bisecting, _DONE, phase)
-        return eqx.tree_at(lambda s: (s.phase, s.k, s.r_end), s, (phase, k, r_end))
-
-    def fallback(s: _SolveState, f) -> _SolveState:
-        # One evaluation of fn in each lane: at the search's next point
-        # (lower + growth (2**k - 1), up to 2**_SEARCH_STEPS growths: a verdict of
-        # no root rests on this scan, not only on where Newton's method happened to
-        # step) or at the bracket's midpoint.
-        y = s.bracket.midpoint()
-        if growth is not None:
-            # 2**k in the iterate's dtype: under x64, a float32 solve would
-            # otherwise get float64 iterates (2.0**k of an int is float64 there).
-            y_search = lower + growth * ((2.0**s.k).astype(y.dtype) - 1.0)
-            y = jnp.where(s.phase == _SEARCH, jnp.minimum(y_search, top), y)
-        r = f(y)[0]
-        s = eqx.tree_at(
-            lambda s: (s.bracket, s.k, s.y_end, s.r_end),
-            s,
-            (s.bracket.see(y, r), s.k + 1, y, r),
-        )
-        return settle(s)
-
-    def initial(y0) -> _SolveState:
-        # The state before the first Newton step from y0.
-        inf = jnp.full_like(y0, jnp.inf)
-        no = jnp.zeros_like(y0, dtype=bool)
-        zero = jnp.zeros_like(y0, dtype=jnp.int32)
-        bracket = Bracket.empty(y0, slope_sign)
-        return _SolveState(y0, inf, inf, bracket, no, no, 0, zero, zero, y0, inf)
-
-    def fixed_steps(g, args, y0):
-        # `solver.steps_unrolled` Newton steps and no loop: the first of two passes.
-        f = lambda y: g(y, args)
-        state = initial(y0)
-        y_eval, aux, aux_t = y0, None, None
-        for _ in range(solver.steps_unrolled):
-            state, (y_eval, aux, aux_t) = newton(state, f, with_aux=True)
-        ok = state.converged & jnp.isfinite(state.y)
-        return state.y, state.slope, ok, y_eval, aux, aux_t
-
-    def at_known(g, args, y0):
-        # One evaluation at the known root: its slope and fn's output there.
-        f = lambda y: g(y, args)
-        (r, aux), (slope, aux_t) = jax.jvp(f, (y0,), (jnp.ones_like(y0),))
-        aux_t = jax.tree_util.tree_map(
-            lambda a, t: t if inexact(a) else jnp.zeros_like(a), aux, aux_t
-        )
-        ok = (jnp.abs(r) <= tol) & jnp.isfinite(y0)
-        return y0, slope, ok, y0, aux, aux_t
-
-    def solve(g, args, y0):
-        # The first `unrolled` Newton steps, Newton's loop, then one loop for the
-        # search and the bisection of the lanes that Newton's method left
-        # unconverged: one loop instead of two costs a batch whose solves all
-        # converge one predicate (and its carry) less per sample. Inside the loops
-        # fn's arguments are tied to the loop's counter (`loop_tied`), so that what
-        # does not depend on y is computed in the iterations taken, not hoisted.
-        f = lambda y: g(y, args)
-        zero = jnp.zeros_like(y0, dtype=jnp.int32)
-        state = initial(y0)
-        shape = jax.eval_shape(lambda y: f(y)[1], y0)
-        aux = jax.tree_util.tree_map(lambda a: jnp.zeros(a.shape, a.dtype), shape)
-        y_eval, aux_t = y0, aux
-        for i in range(solver.steps_unrolled):
-            if i < solver.steps_unrolled - 1:
-                state = newton(state, f)
-            else:
-                state, (y_eval, aux, aux_t) = newton(state, f, with_aux=True)
-        # Where the last unrolled evaluation was within the tolerance, the root is
-        # that point plus one refinement step, and fn's output there follows from
-        # the evaluation's (`aux_at_root`).
-        fresh = state.converged
-        state = jax.lax.while_loop(
-            newton_on,
-            lambda s: newton(s, lambda y: g(y, loop_tied(args, s.steps))),
-            state,
-        )
-        y = state.y
-        ok = state.converged & jnp.isfinite(y)
-        failed = live & ~ok
-        state = eqx.tree_at(
-            lambda s: s.phase, state, jnp.where(failed, _SEARCH, _DONE) + zero
-        )
-        state = jax.lax.while_loop(
-            lambda s: s.phase != _DONE,
-            lambda s: fallback(s, lambda y: g(y, loop_tied(args, s.k))),
-            settle(state),
-        )
-        no_root = failed & ~state.bracket.found
-        # A lane with a bracket has bisected it (at least one step).
-        bisected = failed & state.bracket.found
-        y = jnp.where(bisected, state.y_end, y)
-        # A bisected root has no slope yet: `root_derivatives.implicit_root`
-        # evaluates it, only where it is differentiated.
-        slope = jnp.where(bisected, jnp.nan, state.slope)
-        ok = ok | (bisected & (jnp.abs(state.r_end) <= tol))
-        # Elsewhere (the loops' roots, a lane that is not live) fn's output is
-        # evaluated at y, in a loop that a batch whose roots are all fresh enters for
-        # one predicate only; a lane that is not live keeps the unrolled one.
-        fresh = fresh & ~bisected & jnp.isfinite(y)
-        y_eval = jnp.where(fresh, y_eval, y)
-        aux_t = jax.tree_util.tree_map(
-            lambda t: jnp.where(fresh, t, jnp.zeros_like(t)), aux_t
-        )
-
-        if has_aux:
-            aux = evaluate_where(~fresh & live, lambda y, a: g(y, a)[1], y, args, aux)
-        return y, slope, ok, no_root, y_eval, aux, aux_t
-
     # The solve itself is never differentiated (nor are its start and bounds): the
-    # root's derivatives come from the implicit function theorem (`root_derivatives.implicit_root`).
+    # root's derivatives come from the implicit function theorem
+    # (`root_derivatives.implicit_root`).
     diff, static = eqx.partition(args, eqx.is_inexact_array)
-    frozen = eqx.combine(jax.lax.stop_gradient(diff), static)
+    problem = RootProblem(
+        fn=fn_aux,
+        args=eqx.combine(jax.lax.stop_gradient(diff), static),
+        lower=jax.lax.stop_gradient(lower),
+        top=jnp.inf if upper is None else jax.lax.stop_gradient(upper),
+        growth=None if growth is None else jax.lax.stop_gradient(growth),
+        slope_sign=slope_sign,
+        live=jnp.ones_like(guess, dtype=bool) if active is None else active,
+    )
     if how == ROBUST:
-        y, slope, ok, no_root, y_eval, aux, aux_t = solve(
-            fn_aux, frozen, jax.lax.stop_gradient(guess)
+        y, slope, ok, no_root, y_eval, aux, aux_t = _robust(
+            solver, problem, jax.lax.stop_gradient(guess), has_aux
         )
     else:
         start = guess if how == FAST else known
-        y, slope, ok, y_eval, aux, aux_t = (fixed_steps if how == FAST else at_known)(
-            fn_aux, frozen, jax.lax.stop_gradient(start)
+        y, slope, ok, y_eval, aux, aux_t = (_fixed_steps if how == FAST else _at_known)(
+            solver, problem, jax.lax.stop_gradient(start)
         )
         no_root = jnp.zeros_like(ok)
     if name is not None:
@@ -485,3 +245,68 @@ def root_scalar(
     if has_aux:
         aux = aux_at_root(y, y_eval, aux, aux_t, args, fn=fn_aux)
     return RootResult(y, ok, no_root, aux if has_aux else None)
+
+
+def _fixed_steps(solver: Newton, problem: RootProblem, y0):
+    """`solver.steps_unrolled` Newton steps and no loop: the first of two passes."""
+    newton = NewtonSteps(solver.tol, solver.max_steps)
+    state = newton.init(problem, y0)
+    y_eval, aux, aux_t = y0, None, None
+    for _ in range(solver.steps_unrolled):
+        state, (y_eval, aux, aux_t) = newton.step_with_aux(problem, state)
+    ok = state.converged & jnp.isfinite(state.y)
+    return state.y, state.slope, ok, y_eval, aux, aux_t
+
+
+def _at_known(solver: Newton, problem: RootProblem, y0):
+    """One evaluation at the known root y0: its slope and fn's output there."""
+    (r, aux), (slope, aux_t) = jvp_with_aux(problem, y0)
+    ok = (jnp.abs(r) <= solver.tol) & jnp.isfinite(y0)
+    return y0, slope, ok, y0, aux, aux_t
+
+
+def _robust(solver: Newton, problem: RootProblem, y0, has_aux: bool):
+    """The first `unrolled` Newton steps, Newton's loop, then one loop for the search
+    and the bisection of the lanes that Newton's method left unconverged (one loop
+    instead of two costs a batch whose solves all converge one predicate, and its
+    carry, less per sample), and fn's output at the root."""
+    newton = NewtonSteps(solver.tol, solver.max_steps)
+    state = newton.init(problem, y0)
+    for _ in range(solver.steps_unrolled - 1):
+        state = newton.step(problem, state)
+    state, (y_eval, aux, aux_t) = newton.step_with_aux(problem, state)
+    # Where the last unrolled evaluation was within the tolerance, the root is that
+    # point plus one refinement step, and fn's output there follows from the
+    # evaluation's (`aux_at_root`).
+    fresh = state.converged
+    state = iterate(newton, problem, state)
+    y = state.y
+    ok = state.converged & jnp.isfinite(y)
+    failed = problem.live & ~ok
+    fallback = BracketBisection(solver.tol)
+    state = iterate(fallback, problem, fallback.init(problem, state, failed))
+    no_root = failed & ~state.bracket.found
+    # A lane with a bracket has bisected it (at least one step).
+    bisected = failed & state.bracket.found
+    y = jnp.where(bisected, state.y_end, y)
+    # A bisected root has no slope yet: `root_derivatives.implicit_root` evaluates
+    # it, only where it is differentiated.
+    slope = jnp.where(bisected, jnp.nan, state.slope)
+    ok = ok | (bisected & (jnp.abs(state.r_end) <= solver.tol))
+    # Elsewhere (the loops' roots, a lane that is not live) fn's output is evaluated
+    # at y, in a loop that a batch whose roots are all fresh enters for one
+    # predicate only; a lane that is not live keeps the unrolled one.
+    fresh = fresh & ~bisected & jnp.isfinite(y)
+    y_eval = jnp.where(fresh, y_eval, y)
+    aux_t = jax.tree_util.tree_map(
+        lambda t: jnp.where(fresh, t, jnp.zeros_like(t)), aux_t
+    )
+    if has_aux:
+        aux = evaluate_where(
+            ~fresh & problem.live,
+            lambda y, a: problem.fn(y, a)[1],
+            y,
+            problem.args,
+            aux,
+        )
+    return y, slope, ok, no_root, y_eval, aux, aux_t

@@ -31,6 +31,48 @@ from .state import (
 )
 
 
+class Simulation(eqx.Module):
+    """How a simulation runs its history: the per-sample root solver, the
+    checkpointing of the scan and what a failure does.
+
+    **Fields:**
+
+    - `solver`: a [`jaxcable.Newton`][] or any optimistix root finder, for the
+        simulations that solve each sample (a rate-driven test: its times; an
+        elongation history: its forces); None (the default): `jaxcable.Newton` with
+        a tolerance set by the cable's dtype. A force history solves nothing and
+        does not use it.
+    - `checkpoint`: optional block length (samples) of a checkpointed scan, for the
+        gradients of long histories in bounded memory (about sqrt(samples)).
+    - `throw`: raise on failure (default). With `throw=False` the failure is
+        returned in `Trajectory.result` (per cable under vmap).
+    """
+
+    solver: Newton | optx.AbstractRootFinder | None = None
+    checkpoint: int | None = eqx.field(default=None, static=True)
+    throw: bool = eqx.field(default=True, static=True)
+
+    def __check_init__(self):
+        if self.solver is not None and not isinstance(
+            self.solver, Newton | optx.AbstractRootFinder
+        ):
+            raise ValueError(
+                "Simulation: `solver` must be a jaxcable.Newton or an optimistix root "
+                f"finder, got {type(self.solver).__name__}."
+            )
+        if self.checkpoint is not None:
+            _checks.require_int("checkpoint", self.checkpoint, 1)
+        if not isinstance(self.throw, bool):
+            raise TypeError(f"Simulation: `throw` must be a bool, got {self.throw!r}.")
+
+    def solver_for(self, cable: Cable) -> Newton | optx.AbstractRootFinder:
+        """The solver of a simulation of `cable`: `solver`, or the default for the
+        cable's dtype."""
+        if self.solver is None:
+            return default_solver(jnp.result_type(float, cable.length))
+        return self.solver
+
+
 def step(
     model: AbstractCableModel,
     cable: Cable,
@@ -72,8 +114,7 @@ def simulate_force_history(
     force: Float[ArrayLike, " samples"],
     *,
     mask: Bool[ArrayLike, " samples"] | None = None,
-    throw: bool = True,
-    checkpoint: int | None = None,
+    method: Simulation = Simulation(),
 ) -> Trajectory:
     """Simulate a time-stamped force history, as a robot logs it.
 
@@ -92,10 +133,8 @@ def simulate_force_history(
     - `force`: cable force at each sample, N, 0 <= force <= `cable.breaking_load`.
     - `mask`: optional, False marks padding samples (histories of different lengths
         in one vmapped batch); they leave the state unchanged.
-    - `throw`: raise on failure (default). With `throw=False` the failure is returned
-        in `Trajectory.result` (per cable under vmap).
-    - `checkpoint`: optional block length (samples) of a checkpointed scan, for the
-        gradients of long histories in bounded memory (about sqrt(samples)).
+    - `method`: a [`jaxcable.Simulation`][]: its `checkpoint` and `throw` (a force
+        history solves nothing: its `solver` is not used).
 
     **Returns:**
 
@@ -103,7 +142,7 @@ def simulate_force_history(
     """
     time, force, mask = check_history(cable, time, force, mask, "force")
     drive = ForceDrive(ForceSample(time, force, mask))
-    return scan.run(drive, model, cable, throw, checkpoint)
+    return _run(drive, model, cable, method)
 
 
 def simulate_rate_test(
@@ -111,9 +150,7 @@ def simulate_rate_test(
     cable: Cable,
     protocol: Protocol,
     *,
-    solver: Newton | optx.AbstractRootFinder | None = None,
-    throw: bool = True,
-    checkpoint: int | None = None,
+    method: Simulation = Simulation(),
 ) -> Trajectory:
     """Simulate a rate-driven test, as a tensile tester runs it (Park Section 4).
 
@@ -128,12 +165,9 @@ def simulate_rate_test(
     - `model`: any [`jaxcable.AbstractCableModel`][].
     - `cable`: the [`jaxcable.Cable`][] (one cable; `jax.vmap` for a batch).
     - `protocol`: the [`jaxcable.Protocol`][] (ramps, holds, rests).
-    - `solver`: optional [`jaxcable.Newton`][] or any optimistix root finder (default
-        `jaxcable.Newton` with tolerances in seconds set by the dtype).
-    - `throw`: raise on failure (default); `throw=False` returns the status in
-        `Trajectory.result`.
-    - `checkpoint`: optional block length (samples) of a checkpointed scan, for the
-        gradients of long histories in bounded memory (about sqrt(samples)).
+    - `method`: a [`jaxcable.Simulation`][]: the solver of the times (default
+        `jaxcable.Newton` with a tolerance set by the dtype), `checkpoint` and
+        `throw`.
 
     **Returns:**
 
@@ -141,9 +175,8 @@ def simulate_rate_test(
     """
     check_protocol(cable, protocol)
     check_dtypes(model, cable)
-    if solver is None:
-        solver = default_solver(jnp.result_type(float, cable.length))
-    return scan.run(RateDrive(protocol, solver), model, cable, throw, checkpoint)
+    drive = RateDrive(protocol, _method(method).solver_for(cable))
+    return _run(drive, model, cable, method)
 
 
 def simulate_elongation_history(
@@ -153,9 +186,7 @@ def simulate_elongation_history(
     elongation: Float[ArrayLike, " samples"],
     *,
     mask: Bool[ArrayLike, " samples"] | None = None,
-    solver: Newton | optx.AbstractRootFinder | None = None,
-    throw: bool = True,
-    checkpoint: int | None = None,
+    method: Simulation = Simulation(),
 ) -> Trajectory:
     """Simulate a time-stamped elongation history (displacement control, e.g. a
     relaxation test): the force of each sample is solved by Newton's method.
@@ -170,8 +201,10 @@ def simulate_elongation_history(
     - `cable`: the [`jaxcable.Cable`][].
     - `time`: sample times, s, strictly increasing.
     - `elongation`: imposed elongation, m.
-    - `mask`, `solver`, `throw`, `checkpoint`: as in
-        [`jaxcable.simulate_rate_test`][] and [`jaxcable.simulate_force_history`][].
+    - `mask`: as in [`jaxcable.simulate_force_history`][].
+    - `method`: a [`jaxcable.Simulation`][]: the solver of the forces (default
+        `jaxcable.Newton` with a tolerance set by the dtype), `checkpoint` and
+        `throw`.
 
     **Returns:**
 
@@ -179,10 +212,24 @@ def simulate_elongation_history(
     """
     time, elongation, mask = check_history(cable, time, elongation, mask, "elongation")
     check_dtypes(model, cable)
-    if solver is None:
-        solver = default_solver(jnp.result_type(float, cable.length))
-    drive = ElongationDrive(ElongationSample(time, elongation, mask), solver)
-    return scan.run(drive, model, cable, throw, checkpoint)
+    samples = ElongationSample(time, elongation, mask)
+    drive = ElongationDrive(samples, _method(method).solver_for(cable))
+    return _run(drive, model, cable, method)
+
+
+def _method(method: Simulation) -> Simulation:
+    """`method`, checked to be a [`jaxcable.Simulation`][]."""
+    if not isinstance(method, Simulation):
+        raise TypeError(
+            f"`method` must be a jaxcable.Simulation, got {type(method).__name__}."
+        )
+    return method
+
+
+def _run(drive, model, cable, method: Simulation) -> Trajectory:
+    """The drive's history through the scan kernel, as `method` says."""
+    method = _method(method)
+    return scan.run(drive, model, cable, method.throw, method.checkpoint)
 
 
 def check_history(

@@ -9,6 +9,7 @@ from .distributions import (
     Uniform as Uniform,
 )
 from .inputs import ForceHistory as ForceHistory
+from .method import MonteCarlo as MonteCarlo
 from .montecarlo import MonteCarloResult as MonteCarloResult, monte_carlo as monte_carlo
 from .samplers import (
     AbstractParameterSampler as AbstractParameterSampler,

@@ -56,16 +56,6 @@ class ForceHistory(eqx.Module):
         self.mask = jnp.broadcast_to(mask, shape)
 
 
-def check_int(name: str, value, minimum: int) -> int:
-    """Raise `ValueError` unless `value` is an int (not a bool) >= `minimum`; return
-    it as a Python int."""
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise ValueError(f"`{name}` must be an int, got {value!r}.")
-    if value < minimum:
-        raise ValueError(f"`{name}` must be >= {minimum}, got {value}.")
-    return int(value)
-
-
 def check_key(key) -> PRNGKeyArray:
     """Raise `ValueError` unless `key` is one JAX PRNG key (a typed key, or the raw
     uint32 data of one); return it as a typed key."""

@@ -3,14 +3,13 @@ over the draws, sharded over devices, reduced to percentiles of elongation over 
 (`monte_carlo`, returning a `MonteCarloResult`)."""
 
 import warnings
-from collections.abc import Sequence
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
-from jaxtyping import Array, Float, Int, PRNGKeyArray
+from jaxtyping import Array, Float, Int
 
 from .._cable import Cable
 from .._drive import Protocol
@@ -23,11 +22,10 @@ from .inputs import (
     ForceHistory,
     check_cables,
     check_devices,
-    check_int,
-    check_key,
     check_loads,
     check_percentiles,
 )
+from .method import MonteCarlo
 from .samplers import AbstractParameterSampler
 from .sharding import (
     AXIS,
@@ -126,15 +124,8 @@ def monte_carlo(
     parameters: AbstractParameterSampler,
     cables: Cable,
     loads: Protocol | ForceHistory,
+    method: MonteCarlo,
     *,
-    key: PRNGKeyArray,
-    num_draws: int,
-    percentiles: Sequence[float] = (1.0, 5.0, 50.0, 95.0, 99.0),
-    chunk_size: int | None = None,
-    method: str = "auto",
-    bins: int = 1024,
-    keep_draws: bool = False,
-    devices: Sequence[jax.Device] | None = None,
     progress_meter: AbstractProgressMeter | None = None,
 ) -> MonteCarloResult:
     """Monte-Carlo of a set of cables over parameter draws: percentiles of elongation
@@ -143,9 +134,9 @@ def monte_carlo(
     Each draw is one parameter set (from `parameters`), shared by all cables (the 8
     cables of a CDPR cut from one spool); every (draw, cable) pair is simulated with the
     cable's length, speed and load history, all in one jitted `vmap`. Draws run in
-    chunks of `chunk_size` (one compiled function called once per chunk with the same
+    chunks of `method.chunk_size` (one compiled function called once per chunk with the same
     shapes; the last chunk is padded with draws that are discarded), so memory is
-    bounded whatever `num_draws` is. Draw i uses the key `jax.random.fold_in(key, i)`:
+    bounded whatever the number of draws is. Draw i uses the key `jax.random.fold_in(method.key, i)`:
     results are reproducible and do not depend on `chunk_size` or on the devices.
 
     A (draw, cable) whose simulation fails (`RESULTS` other than `successful`, e.g. a
@@ -155,7 +146,7 @@ def monte_carlo(
     such a failure, `RESULTS.strain_beyond_break`, and is also counted in
     `num_broken`.
 
-    **Percentiles in bounded memory.** `method="exact"` keeps every draw on the host
+    **Percentiles in bounded memory.** `MonteCarlo(method="exact")` keeps every draw on the host
     (draws x cables x samples values) and calls `numpy.percentile`. `method="histogram"`
     keeps, per (cable, sample), a histogram of `bins` equal bins over the range of the
     first chunk widened by half of it on each side, plus an underflow and an overflow
@@ -169,7 +160,7 @@ def monte_carlo(
     across devices with Chan's formula). `"auto"` is `"exact"` up to
     2**24 stored values, else `"histogram"`.
 
-    **Devices.** The draws of a chunk are sharded over `devices` (default
+    **Devices.** The draws of a chunk are sharded over `method.devices` (default
     `jax.devices()`: every visible device, on every host) with `jax.shard_map` on a
     one-axis `Mesh`; each device runs its share and keeps its own statistics, merged
     once at the end. On one device this is a no-op. On a CPU, XLA runs one scan on one
@@ -198,15 +189,10 @@ def monte_carlo(
         `(cables, samples)` (for protocols: stack equal-length ones, see
         [`jaxcable.Protocol.pad`][], with
         `jax.tree_util.tree_map(lambda *a: jnp.stack(a), *protocols)`).
-    - `key`: a JAX PRNG key (`jax.random.key(seed)`); no default, for reproducibility.
-    - `num_draws`: the number of parameter draws.
-    - `percentiles`: the percentile levels to compute, in percent (0-100).
-    - `chunk_size`: draws per chunk (rounded up to a multiple of the number of
-        devices); default about 2**23 / (cables x samples) per device.
-    - `method`: `"auto"`, `"exact"` or `"histogram"` (see above).
-    - `bins`: histogram bins per (cable, sample) (`method="histogram"`).
-    - `keep_draws`: with `method="exact"`, return every draw in `elongation`.
-    - `devices`: the devices to shard the draws over (default `jax.devices()`).
+    - `method`: a [`jaxcable.MonteCarlo`][]: the number of draws and their key, the
+        percentile levels, the chunk size, `method` (`"auto"`, `"exact"` or
+        `"histogram"`, see above), the histogram's bins, whether to keep every draw
+        and the devices.
     - `progress_meter`: how progress is shown (default
         [`jaxcable.TextProgressMeter`][]: a bar on stderr, kept at the end;
         [`jaxcable.NoProgressMeter`][]: nothing).
@@ -220,138 +206,181 @@ def monte_carlo(
             "`parameters` must be a jaxcable parameter sampler (IndependentParameters "
             f"or CorrelatedParameters), got {type(parameters).__name__}."
         )
-    key = check_key(key)
-    num_draws = check_int("num_draws", num_draws, 1)
-    q = check_percentiles(percentiles)
-    if method not in ("auto", "exact", "histogram"):
-        raise ValueError(
-            f"`method` must be 'auto', 'exact' or 'histogram', got {method!r}."
+    if not isinstance(method, MonteCarlo):
+        raise TypeError(
+            f"`method` must be a jaxcable.MonteCarlo, got {type(method).__name__}."
         )
-    bins = check_int("bins", bins, 2)
     meter = check_progress_meter(progress_meter, TextProgressMeter())
     cables = check_cables(cables)
     loads, load_axis, samples = check_loads(loads, cables)
-    ncables = cables.length.shape[0]
-    dtype = cables.length.dtype
-
-    devices = check_devices(devices)
-    ndev = len(devices)
-    per_draw = ncables * samples
-    if chunk_size is None:
-        # About 2**23 values per device and chunk (32 MiB of float32 elongations).
-        chunk_size = max(1, _CHUNK_VALUES // per_draw) * ndev
-    chunk_size = check_int("chunk_size", chunk_size, 1)
-    chunk_size = min(chunk_size, num_draws)
-    chunk = -(-chunk_size // ndev) * ndev
-    local = chunk // ndev
-    num_chunks = -(-num_draws // chunk)
-
-    if method == "auto":
-        method = "exact" if num_draws * per_draw <= _EXACT_LIMIT else "histogram"
-    if keep_draws and method != "exact":
-        raise ValueError("`keep_draws=True` needs `method='exact'`.")
-    exact = method == "exact"
-    hist_bins = 0 if exact else bins
-    if hist_bins and per_draw * (hist_bins + 2) * 4 > _HISTOGRAM_LIMIT:
-        raise ValueError(
-            f"`bins`={bins} makes a histogram of {per_draw * (bins + 2) * 4 / 2**30:.1f} "
-            "GiB per device for this many cables x samples; use fewer bins."
-        )
-
-    mesh = Mesh(np.asarray(devices), (AXIS,))
+    plan = _Plan.make(method, cables.length.shape[0], samples, cables.length.dtype)
+    mesh = Mesh(np.asarray(plan.devices), (AXIS,))
     replicated = NamedSharding(mesh, P())
     step = chunk_step(
-        mesh, local, load_axis, hist_bins, exact, jax.random.key_impl(key)
+        mesh,
+        plan.local,
+        load_axis,
+        plan.hist_bins,
+        plan.exact,
+        jax.random.key_impl(method.key),
     )
-
     # Every input becomes a global array replicated over the mesh (on several hosts,
     # every process passes the same values).
     dyn, static = eqx.partition((parameters, cables, loads), eqx.is_array)
     dyn = jax.tree_util.tree_map(lambda x: global_array(x, replicated), dyn)
     parameters, cables, loads = eqx.combine(dyn, static)
-    key_data = global_array(jax.random.key_data(key), replicated)
-    total = global_array(np.int32(num_draws), replicated)
+    key_data = global_array(jax.random.key_data(method.key), replicated)
+    total = global_array(np.int32(plan.num_draws), replicated)
 
     def run(c, stats, lo, width):
-        start = global_array(np.int32(c * chunk), replicated)
+        start = global_array(np.int32(c * plan.chunk), replicated)
         return step(parameters, cables, loads, key_data, start, total, stats, lo, width)
 
     def put(x):
-        return global_array(np.asarray(x, dtype), replicated)
+        return global_array(np.asarray(x, plan.dtype), replicated)
 
     def fresh():
-        return empty_statistics(mesh, ncables, samples, hist_bins, dtype)
-
-    lo = np.zeros((ncables, samples), dtype)
-    width = np.ones((ncables, samples), dtype)
-    if hist_bins:
-        # The bins are set by the range of the first chunk: it is run once more (same
-        # compiled function) and only its exact minimum and maximum are kept.
-        probe = run(0, fresh(), put(lo), put(width))
-        lo, width = histogram_edges(
-            to_host(probe.minimum).min(axis=0),
-            to_host(probe.maximum).max(axis=0),
-            hist_bins,
-            dtype,
+        return empty_statistics(
+            mesh, plan.ncables, plan.samples, plan.hist_bins, plan.dtype
         )
-    lo_dev, width_dev = put(lo), put(width)
 
+    lo, width = _bins(plan, run, fresh, put)
+    stats, kept, kept_valid = _run_chunks(
+        plan, meter, run, fresh(), put(lo), put(width)
+    )
+    merged = merge_devices(jax.tree_util.tree_map(to_host, stats))
+    times = np.asarray(loads.time) if isinstance(loads, ForceHistory) else None
+    return _result(plan, merged, (kept, kept_valid), (lo, width), times)
+
+
+class _Plan(eqx.Module):
+    """The shapes and choices of one Monte-Carlo: `num_draws`, the draws per
+    `chunk` and per device (`local`), `num_chunks`, the `ncables` x `samples`
+    values per draw, the `dtype`, the percentile levels `q`, the `method` (`"exact"`
+    or `"histogram"`, `exact`, `hist_bins`: 0 when exact), `keep_draws` and the
+    `devices`."""
+
+    num_draws: int
+    chunk: int
+    local: int
+    num_chunks: int
+    ncables: int
+    samples: int
+    dtype: np.dtype
+    q: np.ndarray
+    method: str
+    exact: bool
+    hist_bins: int
+    keep_draws: bool
+    devices: list
+
+    @staticmethod
+    def make(method: MonteCarlo, ncables: int, samples: int, dtype) -> "_Plan":
+        """The plan of `method` for `ncables` x `samples` values per draw."""
+        num_draws = method.num_draws
+        devices = check_devices(method.devices)
+        ndev = len(devices)
+        per_draw = ncables * samples
+        chunk_size = method.chunk_size
+        if chunk_size is None:
+            # About 2**23 values per device and chunk (32 MiB of float32 elongations).
+            chunk_size = max(1, _CHUNK_VALUES // per_draw) * ndev
+        chunk_size = min(chunk_size, num_draws)
+        chunk = -(-chunk_size // ndev) * ndev
+        statistics = method.method
+        if statistics == "auto":
+            exact_fits = num_draws * per_draw <= _EXACT_LIMIT
+            statistics = "exact" if exact_fits else "histogram"
+        if method.keep_draws and statistics != "exact":
+            raise ValueError("`keep_draws=True` needs `method='exact'`.")
+        exact = statistics == "exact"
+        hist_bins = 0 if exact else method.bins
+        if hist_bins and per_draw * (hist_bins + 2) * 4 > _HISTOGRAM_LIMIT:
+            raise ValueError(
+                f"`bins`={method.bins} makes a histogram of "
+                f"{per_draw * (method.bins + 2) * 4 / 2**30:.1f} GiB per device for "
+                "this many cables x samples; use fewer bins."
+            )
+        return _Plan(
+            num_draws=num_draws,
+            chunk=chunk,
+            local=chunk // ndev,
+            num_chunks=-(-num_draws // chunk),
+            ncables=ncables,
+            samples=samples,
+            dtype=dtype,
+            q=check_percentiles(method.percentiles),
+            method=statistics,
+            exact=exact,
+            hist_bins=hist_bins,
+            keep_draws=method.keep_draws,
+            devices=devices,
+        )
+
+
+def _bins(plan: _Plan, run, fresh, put):
+    """The histogram's lower edges and bin widths per (cable, sample), set by the
+    range of the first chunk (run once more, the same compiled function, keeping
+    only its exact minimum and maximum); zeros and ones when exact."""
+    lo = np.zeros((plan.ncables, plan.samples), plan.dtype)
+    width = np.ones((plan.ncables, plan.samples), plan.dtype)
+    if not plan.hist_bins:
+        return lo, width
+    probe = run(0, fresh(), put(lo), put(width))
+    return histogram_edges(
+        to_host(probe.minimum).min(axis=0),
+        to_host(probe.maximum).max(axis=0),
+        plan.hist_bins,
+        plan.dtype,
+    )
+
+
+def _run_chunks(plan: _Plan, meter, run, stats, lo_dev, width_dev):
+    """Every chunk in turn: the statistics, and with exact percentiles every draw's
+    elongation and validity on the host (else None, None)."""
     kept = kept_valid = None
-    if exact:
-        kept = np.empty((num_chunks * chunk, ncables, samples), np.dtype(dtype))
-        kept_valid = np.empty((num_chunks * chunk, ncables), bool)
-    stats = fresh()
-    with meter.bar("monte_carlo", num_chunks, eta=True, keep=True) as bar:
-        for c in range(num_chunks):
+    if plan.exact:
+        rows = plan.num_chunks * plan.chunk
+        kept = np.empty((rows, plan.ncables, plan.samples), np.dtype(plan.dtype))
+        kept_valid = np.empty((rows, plan.ncables), bool)
+    chunk, num_draws = plan.chunk, plan.num_draws
+    with meter.bar("monte_carlo", plan.num_chunks, eta=True, keep=True) as bar:
+        for c in range(plan.num_chunks):
             out = run(c, stats, lo_dev, width_dev)
-            if exact:
+            if plan.exact:
                 stats, elongation, valid = out
                 kept[c * chunk : (c + 1) * chunk] = to_host(elongation)
                 kept_valid[c * chunk : (c + 1) * chunk] = to_host(valid)
             else:
                 stats = jax.block_until_ready(out)
             bar.advance(note=f"{min((c + 1) * chunk, num_draws)}/{num_draws} draws")
+    return stats, kept, kept_valid
 
-    merged = merge_devices(jax.tree_util.tree_map(to_host, stats))
+
+def _result(plan: _Plan, merged, draws, edges, times) -> MonteCarloResult:
+    """The [`jaxcable.MonteCarloResult`][] from the merged statistics, the kept
+    `draws` (elongations and validity, or None), the histogram's `edges` (lower
+    edges and widths) and the given `times` of a force history (None: a protocol's
+    mean solved times)."""
     n_ok = merged.status[STATUS_NAMES.index("successful")]
     none = n_ok == 0
     if np.any(none):
         warnings.warn(
             f"monte_carlo: no successful draw for cables {np.flatnonzero(none).tolist()}; "
             "their statistics are NaN (see `status_counts`).",
-            stacklevel=2,
+            stacklevel=3,
         )
     nan_if_none = lambda a: np.where(none[:, None], np.nan, a)
-
-    if exact:
-        kept, kept_valid = kept[:num_draws], kept_valid[:num_draws]
-        values = percentiles_from_draws(kept, kept_valid, q)
-        resolution = np.where(np.isnan(values), np.nan, 0.0)
-        if keep_draws:
-            kept = np.where(kept_valid[:, :, None], kept, np.nan)
-    else:
-        hist = merged.histogram.reshape(ncables, samples, hist_bins + 2)
-        cnt = np.broadcast_to(n_ok[:, None], (ncables, samples))
-        values, resolution = percentiles_from_histogram(
-            hist,
-            lo.astype(float),
-            width.astype(float),
-            merged.minimum,
-            merged.maximum,
-            cnt,
-            q,
-        )
-        values = np.where(none[None, :, None], np.nan, values)
-        resolution = np.where(none[None, :, None], np.nan, resolution)
-
-    if isinstance(loads, ForceHistory):
-        time = np.broadcast_to(np.asarray(loads.time), (ncables, samples))
+    values, resolution, kept = _percentiles(plan, merged, draws, edges, n_ok)
+    shape = (plan.ncables, plan.samples)
+    if times is not None:
+        time = np.broadcast_to(times, shape)
     else:
         time = nan_if_none(merged.time_mean)
     std = np.sqrt(merged.m2 / np.maximum(merged.count, 1.0)[:, None])
-    as_dtype = lambda a: jnp.asarray(np.asarray(a), dtype)
+    as_dtype = lambda a: jnp.asarray(np.asarray(a), plan.dtype)
     return MonteCarloResult(
-        q=as_dtype(q),
+        q=as_dtype(plan.q),
         time=as_dtype(time),
         percentiles=as_dtype(values),
         resolution=as_dtype(resolution),
@@ -359,7 +388,7 @@ def monte_carlo(
         std=as_dtype(nan_if_none(std)),
         min=as_dtype(nan_if_none(merged.minimum)),
         max=as_dtype(nan_if_none(merged.maximum)),
-        num_draws=num_draws,
+        num_draws=plan.num_draws,
         num_successful=jnp.asarray(n_ok),
         num_broken=jnp.asarray(
             merged.status[STATUS_NAMES.index("strain_beyond_break")]
@@ -367,6 +396,34 @@ def monte_carlo(
         status_counts={
             n: jnp.asarray(status) for n, status in zip(STATUS_NAMES, merged.status)
         },
-        method=method,
-        elongation=as_dtype(kept) if keep_draws else None,
+        method=plan.method,
+        elongation=as_dtype(kept) if plan.keep_draws else None,
     )
+
+
+def _percentiles(plan: _Plan, merged, draws, edges, n_ok):
+    """The percentiles, their resolution and the kept draws (NaN where failed)."""
+    none = n_ok == 0
+    kept, kept_valid = draws
+    if plan.exact:
+        kept, kept_valid = kept[: plan.num_draws], kept_valid[: plan.num_draws]
+        values = percentiles_from_draws(kept, kept_valid, plan.q)
+        resolution = np.where(np.isnan(values), np.nan, 0.0)
+        if plan.keep_draws:
+            kept = np.where(kept_valid[:, :, None], kept, np.nan)
+        return values, resolution, kept
+    lo, width = edges
+    shape = (plan.ncables, plan.samples)
+    hist = merged.histogram.reshape(*shape, plan.hist_bins + 2)
+    values, resolution = percentiles_from_histogram(
+        hist,
+        lo.astype(float),
+        width.astype(float),
+        merged.minimum,
+        merged.maximum,
+        np.broadcast_to(n_ok[:, None], shape),
+        plan.q,
+    )
+    values = np.where(none[None, :, None], np.nan, values)
+    resolution = np.where(none[None, :, None], np.nan, resolution)
+    return values, resolution, kept
