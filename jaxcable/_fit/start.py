@@ -17,7 +17,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from .._drive import simulate_force_history
+from .._drive import Simulation, simulate_force_history
 from .._models import (
     AbstractCableModel,
     AbstractExtension,
@@ -220,7 +220,7 @@ def _strain_of(model, loading: _Loading) -> np.ndarray:
         loading.time,
         loading.force,
         mask=loading.mask,
-        throw=False,
+        method=Simulation(throw=False),
     )
     return np.asarray(traj.strain, float)[loading.mask]
 

@@ -12,7 +12,7 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
 from jaxtyping import Array
 
-from .._drive import Protocol, simulate_force_history, simulate_rate_test
+from .._drive import Protocol, Simulation, simulate_force_history, simulate_rate_test
 from .._results import RESULTS
 from .streaming import Statistics, update
 
@@ -22,14 +22,16 @@ AXIS = "draws"
 # The `RESULTS` member names, in the order of `Statistics.status`; equinox keeps an
 # Enumeration's members in this mapping and has no public list of them.
 STATUS_NAMES = tuple(RESULTS._name_to_item)
+# A draw's failure is counted, not raised.
+_QUIET = Simulation(throw=False)
 
 
 def _simulate_one(model, cable, load):
     if isinstance(load, Protocol):
-        traj = simulate_rate_test(model, cable, load, throw=False)
+        traj = simulate_rate_test(model, cable, load, method=_QUIET)
     else:
         traj = simulate_force_history(
-            model, cable, load.time, load.force, mask=load.mask, throw=False
+            model, cable, load.time, load.force, mask=load.mask, method=_QUIET
         )
     return traj.elongation, traj.time, traj.result
 

@@ -35,7 +35,13 @@ import numpy as np
 import optimistix as optx
 
 from .._cable import Cable
-from .._drive import Protocol, loop_energies, secant_stiffness, simulate_rate_test
+from .._drive import (
+    Protocol,
+    Simulation,
+    loop_energies,
+    secant_stiffness,
+    simulate_rate_test,
+)
 from .._models import IntegratedModel
 from .._results import RESULTS
 
@@ -246,7 +252,8 @@ def simulate_targets(model: IntegratedModel, samples_per_ramp: int, solver, thro
 
     - `model`: the model.
     - `samples_per_ramp`: force samples per ramp.
-    - `solver`, `throw`: passed to [`jaxcable.simulate_rate_test`][].
+    - `solver`, `throw`: the [`jaxcable.Simulation`][] of
+        [`jaxcable.simulate_rate_test`][].
 
     **Returns:**
 
@@ -258,7 +265,7 @@ def simulate_targets(model: IntegratedModel, samples_per_ramp: int, solver, thro
     """
     n = samples_per_ramp
     second, ramp = _protocols(n)
-    kwargs = dict(solver=solver, throw=throw)
+    kwargs = dict(method=Simulation(solver=solver, throw=throw))
 
     def run(length):
         cable = Cable(length=length, speed=SLOW_SPEED)
@@ -379,7 +386,8 @@ def cyclic_shape(model: IntegratedModel, samples_per_ramp: int, solver):
     cycles = [(2 * k * n, 2 * (k + 1) * n + 1) for k in range(CYCLES)]
     stiffness, energy, valleys, ok = [], [], [], []
     for protocol in _shape_protocols(n):
-        traj = simulate_rate_test(model, cable, protocol, solver=solver, throw=False)
+        method = Simulation(solver=solver, throw=False)
+        traj = simulate_rate_test(model, cable, protocol, method=method)
         stiffness.append(secant_stiffness(traj, cycles))
         energy.append(loop_energies(traj, cycles))
         valleys.append(traj.elongation[jnp.array([stop - 1 for _, stop in cycles])])

@@ -147,12 +147,7 @@ def _simulate_robot(robot, scenario, real, controller, gain) -> RobotRun:
         command = lengths - gain * predicted
         # 3. The real cables stretch under the same forces.
         real_state, elongation = controller_step(
-            real,
-            robot.cables(command),
-            carry.real,
-            t,
-            forces,
-            per_cable=True,
+            real, robot.cables(command), carry.real, t, forces
         )
         # 4. Where the stretched cables put the end-effector.
         stretched = command + elongation - robot.routing
