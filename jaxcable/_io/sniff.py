@@ -226,13 +226,14 @@ def _match_header(
         if quantity is not None and unit is not None:
             token = HEADER_UNITS.get((quantity, unit.lower()))
         shown_name = cell if not below or unit is None else f"{cell} ({unit})"
-        if token is None:
+        if token is None or quantity is None:  # (a token names its quantity)
             derived = _derived(shown_name, quantity, unit)
             if derived is not None:
-                candidates.setdefault(derived.quantity, []).append(
+                kind = str(derived.quantity)  # "stress" or "strain"
+                candidates.setdefault(kind, []).append(
                     (_specificity(name), len(mapped))
                 )
-                found.append(f"{_show(cell)} ({derived.quantity})")
+                found.append(f"{_show(cell)} ({kind})")
                 mapped.append(derived._replace(position=position))
                 guess.append(IGNORE)
                 continue
@@ -247,17 +248,16 @@ def _match_header(
         guess.append(token)
         candidates.setdefault(quantity, []).append((_specificity(name), len(mapped)))
         mapped.append(ColumnMap(token, quantity, COLUMNS[token].to_si, position))
+    # `mapped[i]` is the column at position i + 1: one per name, in order.
     problem = ""
     for quantity, ranked in candidates.items():
         ranked.sort()
         if len(ranked) > 1 and ranked[0][0] == ranked[1][0] and not problem:
-            first, second = (names[mapped[i].position - 1] for _, i in ranked[:2])
+            first, second = (names[i] for _, i in ranked[:2])
             problem = f"two {quantity} columns ('{first}' and '{second}')"
         for _, i in ranked[1:]:  # the less specific: not read
             column = mapped[i]
-            mapped[i] = ColumnMap(
-                names[column.position - 1], IGNORE, 1.0, column.position
-            )
+            mapped[i] = ColumnMap(names[i], IGNORE, 1.0, column.position)
     for derived, channel in (("stress", "force"), ("strain", "elongation")):
         if derived in candidates and channel in candidates:
             for _, i in candidates.pop(derived)[:1]:
