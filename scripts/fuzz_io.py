@@ -744,7 +744,7 @@ def keyword_sweep(jc, folder: pathlib.Path) -> dict:
         },
         "read_test(path)": lambda v: jc.read_test(v),
         "read_csv(path)": lambda v: jc.read_csv(v),
-        "read_csv(length_mm=)": lambda v: jc.read_csv(path, length_mm=v),
+        "read_csv(length_mm=)": lambda v: jc.read_csv(path, metadata={"length_mm": v}),
         "write_csv(path)": lambda v: jc.write_csv(v, data),
         "write_csv(data)": lambda v: jc.write_csv(folder / "w.csv", v),
         "mask_slack(data)": lambda v: jc.mask_slack(v),

@@ -230,7 +230,7 @@ def test_stress_without_force(tmp_path):
         jc.read_test(path)
     message = str(error.value)
     assert "\n" not in message and "'Tensile stress (MPa)'" in message
-    assert "diameter_mm=" in message and "--diameter-mm" in message
+    assert "metadata={'diameter_mm'" in message and "--diameter-mm" in message
     given = jc.read_test(
         path,
         metadata={"diameter_mm": 0.399},
@@ -292,7 +292,8 @@ def test_comment_under_the_header_skips_no_row(tmp_path, head):
         (lambda p: jc.ReadOptions(tare="no"), "tare"),
         (lambda p: jc.ReadOptions(frequency_hz=0.0), "frequency_hz"),
         (lambda p: jc.ReadOptions(force_sign=2), "force_sign"),
-        (lambda p: jc.read_csv(p, length_mm="x"), "length_mm"),
+        (lambda p: jc.read_csv(p, metadata={"length_mm": "x"}), "length_mm"),
+        (lambda p: jc.read_csv(p, metadata=300), "metadata"),
         (lambda p: jc.read_csv(None), "path"),
         (lambda p: jc.write_csv(p, "data"), "data"),
         (lambda p: jc.write_csv(3, jc.read_test(p)), "path"),

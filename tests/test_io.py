@@ -63,7 +63,7 @@ def test_cable_in_si(tmp_path):
 
 def test_cable_defaults_and_overrides(tmp_path):
     path = _write(tmp_path, "time_s,force_N\n0,0\n1,1\n")
-    data = jc.read_csv(path, length_mm=100, rate_mm_per_min="6")
+    data = jc.read_csv(path, metadata={"length_mm": 100, "rate_mm_per_min": "6"})
     assert data.metadata == {"length_mm": 100.0, "rate_mm_per_min": 6.0}
     assert data.elongation is None and data.temperature is None and data.extra == {}
     cable = data.cable()
@@ -173,7 +173,7 @@ def test_bad_input_names_file_line_column(tmp_path, case, reader):
 
 def test_missing_length_can_be_given(tmp_path):
     text, _, _ = BAD_INPUTS["missing_length"]
-    data = jc.read_csv(_write(tmp_path, text), length_mm=300)
+    data = jc.read_csv(_write(tmp_path, text), metadata={"length_mm": 300})
     assert data.metadata["length_mm"] == 300.0
 
 

@@ -53,6 +53,39 @@ def check_threshold(value, argument: str, *, positive: bool = False) -> None:
     require_number(argument, value, 0, strict=positive)
 
 
+def check_metadata(metadata, keys: Sequence[str] | None = None) -> dict:
+    """The `metadata` argument of a reader: a mapping (or None) of the `keys` (any
+    key when None), its values numbers or strings (`material` and `id` strings);
+    returned as a dict without its `None` values (not given)."""
+    if metadata is None:
+        return {}
+    if not isinstance(metadata, Mapping):
+        raise TypeError(
+            "`metadata` must be a mapping such as {'length_mm': 300} or None, got "
+            f"{type(metadata).__name__}."
+        )
+    for key in metadata:
+        if keys is not None and key not in keys:
+            raise ValueError(
+                f"`metadata` names {key!r}, which is not one of {', '.join(keys)}."
+            )
+        if not isinstance(key, str):
+            raise TypeError(f"`metadata` keys must be strings, got {key!r}.")
+    given = {key: value for key, value in metadata.items() if value is not None}
+    for key, value in given.items():
+        if key in ("material", "id"):
+            if not isinstance(value, str):
+                raise TypeError(
+                    f"`{key}` must be a string or None, got {type(value).__name__}."
+                )
+        # A string is parsed as the file's values are (`"14.33"`).
+        elif not (is_number(value) or isinstance(value, str)):
+            raise TypeError(
+                f"`{key}` must be a number or None, got {type(value).__name__}."
+            )
+    return given
+
+
 def check_read_arguments(path, columns, metadata, keys: Sequence[str]) -> dict:
     """Check the arguments of [`jaxcable.read_test`][] whose checks need no file
     (the metadata values are checked against the file's by `merge`); return the
@@ -70,31 +103,7 @@ def check_read_arguments(path, columns, metadata, keys: Sequence[str]) -> dict:
             )
         if not columns or (isinstance(columns, str) and not columns.strip()):
             raise ValueError("`columns` must name the file's columns, got none.")
-    if metadata is None:
-        return {}
-    if not isinstance(metadata, Mapping):
-        raise TypeError(
-            "`metadata` must be a mapping such as {'length_mm': 300} or None, got "
-            f"{type(metadata).__name__}."
-        )
-    for key in metadata:
-        if key not in keys:
-            raise ValueError(
-                f"`metadata` names {key!r}, which is not one of {', '.join(keys)}."
-            )
-    given = {key: value for key, value in metadata.items() if value is not None}
-    for key, value in given.items():
-        if key in ("material", "id"):
-            if not isinstance(value, str):
-                raise TypeError(
-                    f"`{key}` must be a string or None, got {type(value).__name__}."
-                )
-        # A string is parsed as the file's values are (`"14.33"`).
-        elif not (is_number(value) or isinstance(value, str)):
-            raise TypeError(
-                f"`{key}` must be a number or None, got {type(value).__name__}."
-            )
-    return given
+    return check_metadata(metadata, keys)
 
 
 def _area_mm2(metadata: dict) -> float | None:
@@ -121,8 +130,8 @@ def derive_channels(
             if area is None:
                 raise ValueError(
                     f"{where(path, header_line, column.name, column.position)}: the "
-                    "file records stress but no force; pass diameter_mm=... "
-                    "(--diameter-mm on the command line) to read the force as the "
+                    "file records stress but no force; pass metadata={'diameter_mm': "
+                    "...} (--diameter-mm on the command line) to read the force as the "
                     "stress times the cross-section (pi d^2 / 4), or columns=... "
                     "(--columns) naming a force column."
                 )

@@ -23,7 +23,7 @@ from collections.abc import Mapping
 import numpy as np
 
 from .._files import atomic_path
-from .arguments import check_path
+from .arguments import check_metadata, check_path
 from .parsing import (
     assemble,
     map_columns,
@@ -37,7 +37,11 @@ from .text import read_lines
 from .units import COLUMNS, QUANTITIES, written_name
 
 
-def read_csv(path: str | os.PathLike, **overrides: float | str) -> TestData:
+def read_csv(
+    path: str | os.PathLike,
+    *,
+    metadata: Mapping[str, float | str | None] | None = None,
+) -> TestData:
     """Read a test history in the canonical CSV format.
 
     The file starts with `# key: value` lines (`length_mm` required; `diameter_mm`,
@@ -53,8 +57,8 @@ def read_csv(path: str | os.PathLike, **overrides: float | str) -> TestData:
     **Arguments:**
 
     - `path`: the file.
-    - `**overrides`: metadata values that replace or add to the file's, e.g.
-        `length_mm=300`.
+    - `metadata`: values that replace or add to the file's `# key: value` block,
+        e.g. `{"length_mm": 300}`; a value `None` is not given.
 
     **Returns:**
 
@@ -62,6 +66,7 @@ def read_csv(path: str | os.PathLike, **overrides: float | str) -> TestData:
 
     **Raises:**
 
+    `TypeError` naming `metadata` (or its key) of a value of the wrong type;
     `ValueError` naming the file, the 1-based line and the column (or metadata key) of
     the first problem: a missing required column, a non-numeric, empty, NaN or
     infinite cell, a value out of range in SI units, time not strictly increasing
@@ -69,7 +74,7 @@ def read_csv(path: str | os.PathLike, **overrides: float | str) -> TestData:
     finite number the [`jaxcable.Cable`][] accepts, or no `length_mm` metadata.
     """
     check_path(path)
-    return read_canonical(path, overrides, raw=False)
+    return read_canonical(path, check_metadata(metadata), raw=False)
 
 
 def read_canonical(

@@ -93,8 +93,8 @@ def cycles_to_time(
     if frequency_hz is None:
         raise ValueError(
             f"{where(path, None, column.name, column.position)}: a cycle count, "
-            "not a time; pass frequency_hz=... (--frequency-hz on the command "
-            "line), the test frequency, to read the time as N / f."
+            "not a time; pass options=ReadOptions(frequency_hz=...) (--frequency-hz "
+            "on the command line), the test frequency, to read the time as N / f."
         )
     count = values[:, position]
     back = np.flatnonzero(np.diff(count) < 0)

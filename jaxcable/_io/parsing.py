@@ -448,7 +448,7 @@ def assemble(
         raise ValueError(
             f"{where(path, header_line)}, metadata 'length_mm': missing (the free "
             "length of the cable, mm); add a line '# length_mm: ...' above the header "
-            "or pass length_mm=... (--length-mm on the command line)."
+            "or pass metadata={'length_mm': ...} (--length-mm on the command line)."
         )
     names = {c.quantity: c.name for c in columns if c.quantity in fields}
     return TestData(

@@ -228,7 +228,7 @@ def merge(
             if key in given:
                 continue  # the caller's value replaces it
             raise ValueError(
-                f"{place}: {item.problem}; or pass {key}=... (--"
+                f"{place}: {item.problem}; or pass metadata={{'{key}': ...}} (--"
                 f"{key.replace('_', '-')} on the command line)."
             )
         try:

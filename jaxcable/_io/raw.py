@@ -255,7 +255,7 @@ def read_test(
         with any consistent area), `strain`, `strain_percent` (the elongation = the
         strain x `length_mm`), `stretch_ratio` (lambda: the elongation = (lambda -
         1) x `length_mm`) and `cycles` (a cycle count: the time is N /
-        `frequency_hz`, a burst of samples at one count read as one sample, its
+        `options.frequency_hz`, a burst of samples at one count read as one sample, its
         mean; see `jaxcable/_io/cycles.py` for why). Or some columns by their
         header names, `"Machine_Load=force_kN,Machine_N_cycles=cycles"`: the first
         row holding every name is the header, its other columns are not read.
