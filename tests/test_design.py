@@ -86,6 +86,8 @@ def test_design_command(creep_csv, tmp_path, capsys):
         (dict(duration_s=10.0, max_force_fraction=2.0), "max_force_fraction"),
         (dict(duration_s=10.0, speed_mm_per_min=(5.0, 1.0)), "speed_mm_per_min"),
         (dict(duration_s=10.0, samples=3), "samples"),
+        (dict(duration_s=10.0, blocks=0), "blocks"),
+        (dict(duration_s=10.0, noise_mm=0.0), "noise_mm"),
     ],
 )
 def test_budget_errors_name_the_field(kwargs, match):
@@ -94,17 +96,18 @@ def test_budget_errors_name_the_field(kwargs, match):
 
 
 @pytest.mark.parametrize(
-    "kwargs, match",
+    "kwargs, error, match",
     [
-        (dict(budget={"duration_s": 10.0}), "budget"),
-        (dict(steps=-1), "steps"),
-        (dict(steps=2.0), "steps"),
-        (dict(learning_rate=0.0), "learning_rate"),
-        (dict(learning_rate=float("inf")), "learning_rate"),
+        (dict(budget={"duration_s": 10.0}), ValueError, "budget"),
+        (dict(steps=-1), ValueError, "steps"),
+        (dict(steps=2.0), TypeError, "steps"),
+        (dict(learning_rate=0.0), ValueError, "learning_rate"),
+        (dict(learning_rate=float("inf")), ValueError, "learning_rate"),
+        (dict(learning_rate=None), TypeError, "learning_rate"),
     ],
 )
-def test_test_design_errors_name_the_field(kwargs, match):
-    with pytest.raises(ValueError, match=match):
+def test_test_design_errors_name_the_field(kwargs, error, match):
+    with pytest.raises(error, match=match):
         jc.TestDesign(**{"budget": BUDGET, **kwargs})
 
 

@@ -107,14 +107,25 @@ def test_arviz_conversion_or_clear_error(posterior):
         (dict(noise="gaussian"), "noise"),
         (dict(num_samples=2), "num_samples"),
         (dict(num_chains=0), "num_chains"),
-        (dict(num_warmup=1.5), "num_warmup"),
-        (dict(max_doublings=True), "max_doublings"),
         (dict(prior_scale=-1.0), "prior_scale"),
         (dict(prior_scale=float("nan")), "prior_scale"),
     ],
 )
 def test_nuts_errors_name_the_field(kwargs, match):
     with pytest.raises(ValueError, match=match):
+        jc.NUTS(**kwargs)
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        (dict(num_warmup=1.5), "num_warmup"),
+        (dict(max_doublings=True), "max_doublings"),
+        (dict(prior_scale="1"), "prior_scale"),
+    ],
+)
+def test_nuts_type_errors_name_the_field(kwargs, match):
+    with pytest.raises(TypeError, match=match):
         jc.NUTS(**kwargs)
 
 

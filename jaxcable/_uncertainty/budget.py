@@ -3,6 +3,8 @@
 import dataclasses
 import math
 
+from .._checks import require_int, require_number
+
 
 @dataclasses.dataclass(frozen=True)
 class TestBudget:
@@ -31,14 +33,9 @@ class TestBudget:
     noise_mm: float | None = None
 
     def __post_init__(self):
-        if not (
-            isinstance(self.duration_s, (int, float)) and 0 < self.duration_s < math.inf
-        ):
-            raise ValueError(
-                f"`budget.duration_s` must be a finite number > 0, got "
-                f"{self.duration_s!r}."
-            )
-        if not 0 < self.max_force_fraction <= 1:
+        require_number("budget.duration_s", self.duration_s, 0.0, strict=True)
+        fraction = require_number("budget.max_force_fraction", self.max_force_fraction)
+        if not 0 < fraction <= 1:
             raise ValueError(
                 "`budget.max_force_fraction` must be in (0, 1], got "
                 f"{self.max_force_fraction!r}."
@@ -49,16 +46,9 @@ class TestBudget:
                 "`budget.speed_mm_per_min` must be (slowest, fastest) with 0 < "
                 f"slowest <= fastest, got {self.speed_mm_per_min!r}."
             )
-        if not isinstance(self.blocks, int) or self.blocks < 1:
-            raise ValueError(
-                f"`budget.blocks` must be an int >= 1, got {self.blocks!r}."
-            )
-        if not isinstance(self.samples, int) or self.samples < 8 * self.blocks:
-            raise ValueError(
-                f"`budget.samples` must be an int >= 8 per block ({8 * self.blocks}), "
-                f"got {self.samples!r}."
-            )
-        if self.noise_mm is not None and not 0 < self.noise_mm < math.inf:
-            raise ValueError(
-                f"`budget.noise_mm` must be a number > 0, got {self.noise_mm!r}."
-            )
+        require_int("budget.blocks", self.blocks, 1)
+        # At least 8 samples per block: a ramp up and down and a hold and a rest of
+        # two samples each.
+        require_int("budget.samples", self.samples, 8 * self.blocks)
+        if self.noise_mm is not None:
+            require_number("budget.noise_mm", self.noise_mm, 0.0, strict=True)

@@ -6,6 +6,7 @@ import json
 import math
 import os
 from collections.abc import Sequence
+from typing import Any
 
 import equinox as eqx
 import jax
@@ -13,7 +14,12 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._cable import Cable
-from .._drive import Protocol, simulate_force_history, simulate_rate_test
+from .._drive import (
+    Protocol,
+    Simulation,
+    simulate_force_history,
+    simulate_rate_test,
+)
 from .._files import write_text_atomic
 from .._fit import FitResult, field_at
 from .._models import AbstractCableModel, parameter_info
@@ -25,6 +31,9 @@ from .result import Posterior
 
 # Park's standard protocol: 10 load-unload cycles (Park et al., Section 2.1).
 PARK_CYCLES = 10
+# A candidate design may fail to simulate (a ramp that does not reach its level):
+# the optimiser sees the failure as a non-finite criterion instead of an error.
+QUIET = Simulation(throw=False)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -194,22 +203,24 @@ def optimise(grad, design: Design, steps: int, learning_rate: float):
     import optax
 
     optimiser = optax.apply_if_finite(optax.adam(learning_rate), 5)
-    state = optimiser.init(design)
-    (value, ramp_time), _ = grad(design, 0.0)
+    # optax types its parameters as arrays or containers of them; a Module is one.
+    params: Any = design
+    state = optimiser.init(params)
+    (value, ramp_time), _ = grad(params, 0.0)
     if not np.isfinite(float(value)):
         raise ValueError(
             "`budget`: the starting design fails to simulate (the cable breaks or a "
             "ramp does not reach its level); lower `max_force_fraction`."
         )
-    best = (float(value), design, float(ramp_time))
+    best = (float(value), params, float(ramp_time))
     for _ in range(steps):
-        (value, spent), g = grad(design, ramp_time)
+        (value, spent), g = grad(params, ramp_time)
         if np.isfinite(float(value)) and float(value) < best[0]:
-            best = (float(value), design, float(ramp_time))
+            best = (float(value), params, float(ramp_time))
         if np.isfinite(float(spent)):
             ramp_time = float(spent)
-        updates, state = optimiser.update(g, state, design)
-        design = optax.apply_updates(design, updates)
+        updates, state = optimiser.update(g, state, params)
+        params = optax.apply_updates(params, updates)
     return best[1], best[2], best[0]
 
 
@@ -234,14 +245,13 @@ def designed_protocol(method: TestDesign, cable: Cable, criterion, variants=(0,)
         return value, spent
 
     grad = jax.jit(jax.value_and_grad(loss, has_aux=True))
-    best = None
-    for variant in variants:
-        design, ramp_time, value = optimise(
-            grad, Design.start(layout, variant), method.steps, method.learning_rate
-        )
-        if best is None or value < best[0]:
-            best = (value, design, ramp_time)
-    _, design, ramp_time = best
+    found = [
+        optimise(grad, Design.start(layout, v), method.steps, method.learning_rate)
+        for v in variants
+    ]
+    # The first of the lowest losses (each is finite: optimise refuses a start that
+    # does not simulate).
+    design, ramp_time, _ = min(found, key=lambda f: f[2])
     protocol, c, *parts = build(design, ramp_time)
     return protocol, c, parts, layout
 
@@ -259,7 +269,7 @@ def standard_protocol(model, cable: Cable, budget: TestBudget, duration: float):
         PARK_CYCLES,
         layout.ramp_samples,
     )
-    cyc = simulate_rate_test(model, usual, cycles, throw=False)
+    cyc = simulate_rate_test(model, usual, cycles, method=QUIET)
     rest = max(duration - float(cyc.time[-1]), 1.0)
     standard = Protocol.concatenate(
         cycles, Protocol.rest(rest, max(2, budget.samples - cycles.num_samples))
@@ -366,7 +376,7 @@ def information(knowledge: Knowledge, cable: Cable, time, force):
 
     def elongation(theta):
         traj = simulate_force_history(
-            knowledge.with_theta(theta), cable, time, force, throw=False
+            knowledge.with_theta(theta), cable, time, force, method=QUIET
         )
         return traj.elongation
 

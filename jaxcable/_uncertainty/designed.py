@@ -92,7 +92,7 @@ class DesignedTest(_d.DesignedProtocol):
 def _precision_after(knowledge: _d.Knowledge, cable: Cable, protocol: Protocol):
     """The information after a rate-driven test: simulate it (its sample times are
     solved), then the Fisher information of it as the fit would see it."""
-    traj = simulate_rate_test(knowledge.model, cable, protocol, throw=False)
+    traj = simulate_rate_test(knowledge.model, cable, protocol, method=_d.QUIET)
     info = _d.information(knowledge, cable, traj.time, protocol.force)
     return jnp.asarray(knowledge.precision()) + info, traj
 

@@ -3,6 +3,7 @@ candidate models, `jaxcable.design_discriminating_test`."""
 
 import dataclasses
 import math
+import typing
 
 import jax
 import jax.numpy as jnp
@@ -123,7 +124,7 @@ def _response(knowledge: _d.Knowledge, cable: Cable, time, force):
 
     def elongation(theta):
         traj = simulate_force_history(
-            knowledge.with_theta(theta), cable, time, force, throw=False
+            knowledge.with_theta(theta), cable, time, force, method=_d.QUIET
         )
         return traj.elongation, traj.elongation
 
@@ -166,7 +167,7 @@ def _bic(fit: FitResult) -> float:
     return bic(pooled, total, len(fit.names), 1e3)
 
 
-def _leading_pair(source):
+def _leading_pair(source) -> tuple[str, FitResult, str, FitResult, float]:
     """`(name_a, fit_a, name_b, fit_b, bic_now)` of a Diagnosis (its two candidates
     of lowest ΔBIC that were fitted and did not diverge) or of a pair of FitResults
     (BIC(b) - BIC(a) of the fits, NaN unless every test is force-driven)."""
@@ -190,17 +191,19 @@ def _leading_pair(source):
                 f"({[c.id for c in ranked]}); there is nothing to separate."
             )
         a, b = ranked[:2]
-        return a.id, a.fit, b.id, b.fit, b.delta_bic - a.delta_bic
+        fit_a, fit_b = typing.cast(FitResult, a.fit), typing.cast(FitResult, b.fit)
+        return a.id, fit_a, b.id, fit_b, b.delta_bic - a.delta_bic
     pair = tuple(source) if isinstance(source, (tuple, list)) else ()
     if len(pair) != 2 or not all(isinstance(f, FitResult) for f in pair):
         raise ValueError(
             "`candidates` must be a jaxcable.Diagnosis or two jaxcable.FitResult, "
             f"got {type(source).__name__}."
         )
+    first, second = typing.cast(tuple[FitResult, FitResult], pair)
     names = [type(f.model).__name__ for f in pair]
     if names[0] == names[1]:
         names = [f"{n} ({i + 1})" for i, n in enumerate(names)]
-    return names[0], pair[0], names[1], pair[1], _bic(pair[1]) - _bic(pair[0])
+    return names[0], first, names[1], second, _bic(second) - _bic(first)
 
 
 def design_discriminating_test(
@@ -262,7 +265,7 @@ def design_discriminating_test(
     sigma = min(first.noise_m, second.noise_m)
 
     def criterion(protocol, c):
-        traj = simulate_rate_test(first.model, c, protocol, throw=False)
+        traj = simulate_rate_test(first.model, c, protocol, method=_d.QUIET)
         t_ab, t_ba = separations(first, second, c, traj.time, protocol.force, sigma)
         # A smooth minimum (within about one unit of noise-sum of the smaller).
         low = -jnp.logaddexp(-t_ab, -t_ba)
@@ -273,11 +276,11 @@ def design_discriminating_test(
     protocol, c, parts, layout = _d.designed_protocol(
         method, cable, criterion, variants=(0, 1, 2)
     )
-    traj = simulate_rate_test(first.model, c, protocol, throw=False)
+    traj = simulate_rate_test(first.model, c, protocol, method=_d.QUIET)
     duration = float(traj.time[-1])
     found = separations(first, second, c, traj.time, protocol.force, sigma)
     standard, usual = _d.standard_protocol(first.model, cable, budget, duration)
-    std_traj = simulate_rate_test(first.model, usual, standard, throw=False)
+    std_traj = simulate_rate_test(first.model, usual, standard, method=_d.QUIET)
     baseline = separations(first, second, usual, std_traj.time, standard.force, sigma)
     result = DiscriminatingTest(
         protocol=protocol,
@@ -286,8 +289,8 @@ def design_discriminating_test(
         candidates=(name_a, name_b),
         parameters=(len(fit_a.names), len(fit_b.names)),
         bic_now=float(bic_now),
-        separation=tuple(float(t) for t in found),
-        separation_standard=tuple(float(t) for t in baseline),
+        separation=(float(found[0]), float(found[1])),
+        separation_standard=(float(baseline[0]), float(baseline[1])),
         samples=int(protocol.num_samples),
         samples_before=int(np.sum(fit_a.num_samples)),
         duration_s=duration,

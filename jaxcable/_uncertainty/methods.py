@@ -2,30 +2,15 @@
 sampler ([`jaxcable.NUTS`][]) and the test design's optimiser with the lab's budget
 ([`jaxcable.TestDesign`][])."""
 
-import math
-
 import equinox as eqx
 from jaxtyping import PRNGKeyArray
 
+from .._checks import require_int, require_number
 from .budget import TestBudget
 from .priors import PRIOR_SCALE
 
 
 NOISE_MODELS = ("fitted", "robust")
-
-
-def _require_int(name: str, value, low: int) -> None:
-    if isinstance(value, bool) or not isinstance(value, int) or value < low:
-        raise ValueError(f"`{name}` must be an int >= {low}, got {value!r}.")
-
-
-def _require_positive(name: str, value) -> None:
-    if not (
-        isinstance(value, (int, float))
-        and not isinstance(value, bool)
-        and 0 < value < math.inf
-    ):
-        raise ValueError(f"`{name}` must be a finite number > 0, got {value!r}.")
 
 
 class NUTS(eqx.Module):
@@ -57,7 +42,8 @@ class NUTS(eqx.Module):
 
     **Raises:**
 
-    `ValueError` naming the field.
+    `TypeError` (not an integer, not a number) or `ValueError` (out of range)
+    naming the field.
     """
 
     num_samples: int = eqx.field(default=500, static=True)
@@ -69,15 +55,15 @@ class NUTS(eqx.Module):
     prior_scale: float = eqx.field(default=PRIOR_SCALE, static=True)
 
     def __check_init__(self):
-        _require_int("num_samples", self.num_samples, 4)
-        _require_int("num_chains", self.num_chains, 1)
-        _require_int("num_warmup", self.num_warmup, 1)
-        _require_int("max_doublings", self.max_doublings, 1)
+        require_int("num_samples", self.num_samples, 4)
+        require_int("num_chains", self.num_chains, 1)
+        require_int("num_warmup", self.num_warmup, 1)
+        require_int("max_doublings", self.max_doublings, 1)
         if self.noise not in NOISE_MODELS:
             raise ValueError(
                 f"`noise` must be one of {NOISE_MODELS}, got {self.noise!r}."
             )
-        _require_positive("prior_scale", self.prior_scale)
+        require_number("prior_scale", self.prior_scale, 0.0, strict=True)
 
 
 class TestDesign(eqx.Module):
@@ -95,7 +81,8 @@ class TestDesign(eqx.Module):
 
     **Raises:**
 
-    `ValueError` naming the field.
+    `TypeError` (not an integer, not a number) or `ValueError` (out of range)
+    naming the field.
     """
 
     # Not collected by pytest although its name starts with "Test".
@@ -111,5 +98,5 @@ class TestDesign(eqx.Module):
                 "`budget` must be a jaxcable.TestBudget, got "
                 f"{type(self.budget).__name__}."
             )
-        _require_int("steps", self.steps, 0)
-        _require_positive("learning_rate", self.learning_rate)
+        require_int("steps", self.steps, 0)
+        require_number("learning_rate", self.learning_rate, 0.0, strict=True)

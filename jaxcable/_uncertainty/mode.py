@@ -3,6 +3,8 @@ least-squares optimum is the mode only when every test has the same noise, and a
 chain that starts elsewhere spends its warm-up travelling (the metric then learns the
 journey, not the posterior's shape)."""
 
+from collections.abc import Callable
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -15,7 +17,7 @@ class _Whitened(eqx.Module):
     """-log density at u = center + chol z (the Laplace approximation whitened, so
     that Newton starts with the right scales)."""
 
-    density: eqx.Module
+    density: Callable[[jax.Array], jax.Array]  # a Module called with u
     center: jax.Array
     chol: jax.Array
 
@@ -74,7 +76,9 @@ def _newton(loss: _Whitened, max_steps: int):
     return z, float(value), start
 
 
-def posterior_mode(density: eqx.Module, u_hat, cov, max_steps: int = 20):
+def posterior_mode(
+    density: Callable[[jax.Array], jax.Array], u_hat, cov, max_steps: int = 20
+):
     """The mode of `density` from `u_hat` and the covariance there.
 
     **Arguments:**

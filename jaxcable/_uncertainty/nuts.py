@@ -75,7 +75,7 @@ class ChainsOut(eqx.Module):
     steps: Array
 
 
-def _value_and_grad(density: eqx.Module, u):
+def _value_and_grad(density: Callable[[Array], Array], u):
     """The value and the forward-mode gradient of `density(u)` (see
     `logdensity_of`)."""
 
@@ -89,7 +89,7 @@ def _value_and_grad(density: eqx.Module, u):
 
 
 @jax.custom_vjp
-def _forward_density(density: eqx.Module, u):
+def _forward_density(density: Callable[[Array], Array], u):
     return _value_and_grad(density, u)[0]
 
 
@@ -105,7 +105,7 @@ def _forward_density_bwd(grad, cotangent):
 _forward_density.defvjp(_forward_density_fwd, _forward_density_bwd)
 
 
-def logdensity_of(density: eqx.Module) -> Callable[[Array], Array]:
+def logdensity_of(density: Callable[[Array], Array]) -> Callable[[Array], Array]:
     """`density` (a Module, a scalar function of a short vector u) whose gradient is
     taken in forward mode, one tangent per entry of u carried through the
     simulation's scan together: for a few parameters and thousands of samples this

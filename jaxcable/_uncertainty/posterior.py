@@ -2,6 +2,7 @@
 
 import time
 import warnings
+from typing import Any
 
 import equinox as eqx
 import jax
@@ -127,7 +128,8 @@ class LogPosterior(eqx.Module):
     - `prior_scale`: the prior's standard deviation on the unconstrained scale.
     """
 
-    problem: eqx.Module
+    # The fit package's ResidualProblem (its `data`, `layout`, `residuals`).
+    problem: Any
     sigma: Array
     center: Array
     noise: str = eqx.field(static=True)

@@ -179,13 +179,13 @@ class Posterior:
         """
         variables = {n: self.samples[:, :, i] for i, n in enumerate(self.names)}
         try:
-            import arviz_base
+            import arviz_base  # pyright: ignore[reportMissingImports]
 
             return arviz_base.from_dict({"posterior": variables})
         except ImportError:
             pass
         try:
-            import arviz
+            import arviz  # pyright: ignore[reportMissingImports]
         except ImportError:
             raise ImportError(
                 "Posterior.to_arviz needs ArviZ: pip install arviz (or arviz-base)."
