@@ -27,6 +27,8 @@ EXTRA_RESULTS = {
     "tests/data/real/outcomes.json": "Real records: the diagnosis's outcomes",
     "benchmarks/real_records_before.json": "Real records: the outcomes before the hardening of the start, noise and base",
 }
+# Scripts whose result lives elsewhere (EXTRA_RESULTS).
+RECORDED_ELSEWHERE = {"real_records"}
 FIGURES = ROOT / "notebooks"
 FIGURE_DIR = "figures"
 MAX_CELL = 90  # characters of a text cell shown (error messages can run to 500)
@@ -142,13 +144,22 @@ def _read(path: pathlib.Path):
 
 
 def benchmark_markdown(root: pathlib.Path = ROOT) -> str:
-    """The generated benchmark section of the site."""
-    results = load_results(root)
-    if not results:
-        return "No benchmark result is recorded in the repository yet.\n"
+    """The generated benchmark section of the site: every recorded result, then the
+    scripts that have none yet."""
     lines: list[str] = []
-    for title, source, data in results:
+    for title, source, data in load_results(root):
         lines += render_result(data, title, source)
+    recorded = {p.stem for p in (root / "benchmarks" / "results").glob("*.json")}
+    recorded |= RECORDED_ELSEWHERE
+    missing = sorted(
+        f"`{p.name}`"
+        for p in (root / "benchmarks").glob("*.py")
+        if p.stem not in recorded
+    )
+    if missing:
+        lines += ["### Not recorded yet", "", ", ".join(missing) + ".", ""]
+    if not lines:
+        return "No benchmark result is recorded in the repository yet.\n"
     return "\n".join(lines) + "\n"
 
 

@@ -137,7 +137,10 @@ def test_benchmark_tables_come_from_json(tmp_path):
         "rows": [{"batch": 1, "seconds": 0.012345678}, {"batch": 1024, "seconds": 3.5}],
     }
     (results / "kernel.json").write_text(json.dumps(document))
+    for script in ("kernel.py", "fit.py"):
+        (tmp_path / "benchmarks" / script).write_text("")
     page = hooks.benchmark_markdown(tmp_path)
+    assert "### Not recorded yet\n\n`fit.py`.\n" in page
     assert "### `kernel.py`" in page
     assert "| batch | seconds |" in page
     assert "| 1 | 0.01235 |" in page and "| 1024 | 3.5 |" in page
