@@ -21,7 +21,6 @@ import pathlib
 
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
-RESULTS_DIR = ROOT / "benchmarks" / "results"
 # Results kept elsewhere, with the title their section gets.
 EXTRA_RESULTS = {
     "tests/data/real/outcomes.json": "Real records: the diagnosis's outcomes",
@@ -29,7 +28,6 @@ EXTRA_RESULTS = {
 }
 # Scripts whose result lives elsewhere (EXTRA_RESULTS).
 RECORDED_ELSEWHERE = {"real_records"}
-FIGURES = ROOT / "notebooks"
 FIGURE_DIR = "figures"
 MAX_CELL = 90  # characters of a text cell shown (error messages can run to 500)
 
