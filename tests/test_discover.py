@@ -89,6 +89,29 @@ def test_missing_covariate_column_names_the_test():
         jc.pad_tests(tests, covariate="humidity")
 
 
+@pytest.mark.parametrize(
+    "fields, match",
+    [
+        ({"terms": ["no_such_term"]}, "terms"),
+        ({"heldout": jc.HeldOut(split="tests")}, "heldout"),
+        ({"min_gain_pct": "5"}, "min_gain_pct"),
+        ({"joint_fit": 1}, "joint_fit"),
+        ({"least_squares": None}, "least_squares"),
+    ],
+)
+def test_the_discovery_method_names_its_bad_field(fields, match):
+    with pytest.raises(ValueError, match=match):
+        jc.Discovery(**fields)
+
+
+def test_discover_takes_a_problem_and_a_discovery():
+    tests = _tests(BASE, seeds=(0,))
+    with pytest.raises(TypeError, match="problem"):
+        jc.discover(None, tests)
+    with pytest.raises(TypeError, match="method"):
+        jc.discover(None, jc.Problem(BASE, tests), jc.LeastSquares())
+
+
 @pytest.fixture(scope="module")
 def hidden():
     true = jc.DiscoveredTerm(BASE, theta0=THETA, terms=(TERM,))
