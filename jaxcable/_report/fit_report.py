@@ -11,10 +11,10 @@ from collections.abc import Sequence
 import numpy as np
 
 from .._files import write_text_atomic
-from .._fit import FitResult, model_responses
+from .._fit import FitResult, responses
 from .._io import TestData
 from .._progress import AbstractProgressMeter, NoProgressMeter
-from .plots import plot_loops, plot_residuals, save_png
+from .plots import mask_of, plot_loops, plot_residuals, save_png
 
 
 # The files of the fit report, in the order `write_report` returns them (so that a
@@ -79,7 +79,7 @@ def summary_markdown(
     ]
     for i, test in enumerate(tests):
         source = pathlib.Path(test.source).name if test.source else ""
-        masked = int(np.sum(~test.mask))
+        masked = int(np.sum(~mask_of(test)))
         value, unit = result.rmse(i)
         drive = result.drive(i).name
         lines.append(
@@ -241,7 +241,7 @@ def write_report(
     """
     out.mkdir(parents=True, exist_ok=True)
     with progress_meter.bar("report", 3) as bar:
-        model = model_responses(result, tests)
+        model = responses(result, tests)
         bar.advance(note="simulated")
         loops, resid = (out / name for name in FIT_REPORT_FILES[:2])
         plot_loops(loops, result, tests, model)
@@ -276,7 +276,7 @@ def write_report(
                 pathlib.Path(test.source).name if test.source else "",
                 result.drive(i).name,
                 int(result.num_samples[i]),
-                int(np.sum(~test.mask)),
+                int(np.sum(~mask_of(test))),
                 f"{value:.6g}" if unit == "mm" else "",
                 f"{value:.6g}" if unit == "N" else "",
                 f"{result.rmse_percent[i]:.6g}",

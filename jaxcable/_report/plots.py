@@ -17,6 +17,12 @@ from .._fit import FitResult
 from .._io import TestData
 
 
+def mask_of(test: TestData) -> np.ndarray:
+    """`test.mask`, which a TestData always holds once built (all True unless set)."""
+    assert test.mask is not None
+    return test.mask
+
+
 def save_png(fig, path: str | os.PathLike, dpi: int = 90) -> None:
     """Write the matplotlib figure `fig` to `path` as PNG, atomically."""
     with atomic_path(path) as tmp:
@@ -91,7 +97,9 @@ def plot_loops(
     elongation under the measured force, or its force at the measured elongation."""
     fig, axes = panels(len(tests), 3.6, 3.0, 0.6)
     for i, (ax, test, response) in enumerate(zip(axes, tests, model)):
-        mask = test.mask
+        mask = mask_of(test)
+        # A fitted test has an elongation (the fit's Problem requires it).
+        assert test.elongation is not None
         e = 1e3 * test.elongation
         ax.plot(e, test.force, color="0.55", lw=0.8, label="measured")
         if not mask.all():
@@ -139,11 +147,12 @@ def plot_residuals(
         drive = result.drive(i)
         r = drive.report_scale * (response - drive.scored_of(test))
         unit = drive.report_unit
-        ax.plot(t, np.where(test.mask, r, np.nan), color="tab:blue", lw=0.8)
-        if not test.mask.all():
+        mask = mask_of(test)
+        ax.plot(t, np.where(mask, r, np.nan), color="tab:blue", lw=0.8)
+        if not mask.all():
             ax.plot(
                 t,
-                np.where(test.mask, np.nan, r),
+                np.where(mask, np.nan, r),
                 color="tab:orange",
                 lw=0.8,
                 label="masked (not fitted)",
