@@ -136,7 +136,7 @@ class Stack:
 
 
 def stack_of(base: AbstractCableModel, ids, base_names) -> Stack:
-    """The [`Stack`][] of the candidates `ids` that can wrap `base` (`wrap` raises
+    """The `Stack` of the candidates `ids` that can wrap `base` (`wrap` raises
     for the others, e.g. `hereditary` around a model without Park's creep)."""
     usable = []
     m = base
@@ -213,7 +213,7 @@ class BaseFit:
     - `stack`: the base and every usable candidate as one model.
     - `fitter`: `fitter(active, multistart=1)`, the fit of the base (`active`
         None) or a candidate through the stack's one compiled kernel.
-    - `score`: the base's [`Score`][].
+    - `score`: the base's `Score`.
     - `bic`: its BIC on the training samples.
     - `structure`: its residuals' structure over the whole tests
         ([`jaxcable.residual_structure`][]).

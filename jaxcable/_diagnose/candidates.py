@@ -157,8 +157,8 @@ def covariate_candidates(
 
     **Arguments:**
 
-    - `plan`: the diagnosis's [`Plan`][].
-    - `base`: the base model's [`BaseFit`][] on the training samples.
+    - `plan`: the diagnosis's `Plan`.
+    - `base`: the base model's `BaseFit` on the training samples.
     - `method`: the fits' [`jaxcable.LeastSquares`][] (one start).
     - `progress_meter`: told of each fit.
 
@@ -289,14 +289,14 @@ def discovered_candidate(
 
     **Arguments:**
 
-    - `plan`: the diagnosis's [`Plan`][].
-    - `base`: the base model's [`BaseFit`][] on the training samples.
+    - `plan`: the diagnosis's `Plan`.
+    - `base`: the base model's `BaseFit` on the training samples.
     - `method`: the joint fit's [`jaxcable.LeastSquares`][] (one start).
     - `progress_meter`: told of the stage.
 
     **Returns:**
 
-    A [`Discovered`][], or None when no option found a term or its fit failed.
+    A `Discovered`, or None when no option found a term or its fit failed.
     """
     tests, base_fit = plan.tests, base.fit
     progress_meter.say("discovering a term")
@@ -345,8 +345,8 @@ def departure(plan: Plan, base: BaseFit, candidate: Candidate) -> str:
 
     **Arguments:**
 
-    - `plan`: the diagnosis's [`Plan`][].
-    - `base`: the base's [`BaseFit`][].
+    - `plan`: the diagnosis's `Plan`.
+    - `base`: the base's `BaseFit`.
     - `candidate`: the diverging candidate (with its fit).
 
     **Returns:**

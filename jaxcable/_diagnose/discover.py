@@ -185,7 +185,7 @@ def discover(
 
     **Returns:**
 
-    A [`DiscoveryResult`][].
+    A [`jaxcable.DiscoveryResult`][].
 
     **Raises:**
 
@@ -201,7 +201,7 @@ def discover(
 def discover_terms(
     base_fit: FitResult, tests: list, covariate: str | None, held, method: Discovery
 ) -> DiscoveryResult:
-    """[`discover`][] of `tests` with the extra column `covariate` (or none), held
+    """`discover` of `tests` with the extra column `covariate` (or none), held
     out: `held` (one boolean array per test, True where a sample is held out), else
     the last `method.heldout.fraction` of every test."""
     keep, tests, held = _force_driven(base_fit, tests, held, covariate, method)
@@ -302,7 +302,7 @@ class _Columns(NamedTuple):
 
 
 def _columns(tests: list, covariate: str | None, terms) -> _Columns:
-    """The regression's [`_Columns`][] for `terms` (default: the whole library,
+    """The regression's `_Columns` for `terms` (default: the whole library,
     less the covariate terms without a covariate)."""
     wanted = (
         tuple(terms)
@@ -464,7 +464,7 @@ def term_coefficient(base_fit: FitResult, tests, held, covariate: str, term: str
 
     **Arguments:**
 
-    - `base_fit`, `tests`, `held`, `covariate`: as in [`discover_terms`][].
+    - `base_fit`, `tests`, `held`, `covariate`: as in `discover_terms`.
     - `term`: the library term (a key of `TERMS`).
 
     **Returns:**

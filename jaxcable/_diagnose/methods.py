@@ -297,14 +297,14 @@ def splits(tests, heldout: HeldOut, folds: int) -> list[Fold]:
     **Arguments:**
 
     - `tests`: the tests, each with a mask.
-    - `heldout`: the split: `"time"`, one fold, [`time_split`][] by its `fraction`;
+    - `heldout`: the split: `"time"`, one fold, `time_split` by its `fraction`;
         `"tests"`, `folds` folds of whole tests, test i held out in fold i mod
         `folds`.
     - `folds`: the number of folds by tests.
 
     **Returns:**
 
-    One [`Fold`][] per fold.
+    One `Fold` per fold.
     """
     if heldout.split == "time":
         every = list(range(len(tests)))

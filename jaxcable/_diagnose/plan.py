@@ -24,7 +24,7 @@ class Plan:
 
     - `tests`: the tests, each with a mask.
     - `names`: the base parameters to fit.
-    - `how`: the drives and residual units ([`Scoring`][]).
+    - `how`: the drives and residual units (`Scoring`).
     - `parts`: the folds.
     - `heldout`: the [`jaxcable.HeldOut`][] the folds were made by.
     - `folds`: the number of folds by tests (the number of tests when leaving one
@@ -119,7 +119,7 @@ def choose_candidates(
 
     **Returns:**
 
-    A [`Plan`][].
+    A `Plan`.
 
     **Raises:**
 

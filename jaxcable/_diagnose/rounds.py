@@ -13,7 +13,7 @@ excess, none enough: two effects of similar size, say) takes its best one as a
 term only when none is significant. Partial causes are kept only when a later round
 names its cause and, together with them, it explains what the first partial
 cause's round's base left: within `MAX_FLOOR_RATIO` x the noise, or
-`MIN_EXPLAINED_PCT` % of that excess in squares ([`sufficient`][]); a chain that
+`MIN_EXPLAINED_PCT` % of that excess in squares (`sufficient`); a chain that
 starts with a known cause is confirmed by known causes only (a discovered term
 fitted after a wrong partial cause absorbs what it got wrong). Otherwise they
 are reported as tried (`accepted` False) and the verdict stays what the rounds
@@ -123,7 +123,7 @@ def prune(
 
     **Arguments:**
 
-    - `plan`: the last round's [`Plan`][] (its training and held-out samples).
+    - `plan`: the last round's `Plan` (its training and held-out samples).
     - `final`: the last round's named candidate's fit: every cause in its model,
         the last one outermost.
     - `heldout`: its held-out RMSE.
@@ -132,7 +132,7 @@ def prune(
 
     **Returns:**
 
-    A [`Pruned`][].
+    A `Pruned`.
     """
     kept = [True] * count
     notes = [""] * count

@@ -1,22 +1,22 @@
 """One round of [`jaxcable.diagnose`][]: a pipeline of stages over one round state.
 
-Each stage takes the [`Round`][] so far and gives it back with its part filled in:
+Each stage takes the `Round` so far and gives it back with its part filled in:
 
 1. `plan_stage`: the candidates the data can show, the held-out split, the base
     fitted on the training parts and scored on every fold, and the noise estimated
     from the data;
 2. `family_stage` (the first round only): the base's family checked
-    ([`check_family`][]); the round runs on the family the data want;
+    (`check_family`); the round runs on the family the data want;
 3. `catalogue_stage`: every candidate of the catalogue fitted around the base and
     scored;
 4. `covariates_stage`: the forms a recorded covariate drives (on the time split of
     force-driven tests);
-5. `verdict_stage`: the rule on the scored candidates ([`decide`][]);
+5. `verdict_stage`: the rule on the scored candidates (`decide`);
 6. `discovery_stage`: a discovered term, when the verdict would be
     `"unexplained"`, when it is asked for, or when the named cause leaves a
     recorded covariate unused; the verdict again with it.
 
-[`conclude`][] then gives the round's [`jaxcable.Diagnosis`][].
+`conclude` then gives the round's [`jaxcable.Diagnosis`][].
 """
 
 import dataclasses
@@ -73,7 +73,7 @@ class Round:
 
     **Fields:**
 
-    - `base`: the round's [`RoundBase`][].
+    - `base`: the round's `RoundBase`.
     - `first`: whether it is the first round (which checks the family).
     - `plan`, `fitted`, `noise`: the plan, the base's fit and the noise estimated
         from the data.
@@ -186,7 +186,7 @@ def one_round(
 
 
 def verdict(state: Round) -> Verdict:
-    """The verdict on the round's candidates ([`decide`][])."""
+    """The verdict on the round's candidates (`decide`)."""
     base = state.fitted
     return decide(
         base.score.heldout_rmse,
