@@ -291,7 +291,7 @@ def _thin(data: TestData, every: int) -> TestData:
         temperature=take(data.temperature),
         extra={k: v[index] for k, v in data.extra.items()},
         lines=take(data.lines),
-        mask=data.mask[index],
+        mask=np.asarray(data.mask)[index],
         force_raw=take(data.force_raw),
     )
 
@@ -346,7 +346,7 @@ def describe_tests(
     lines = []
     for i, t in enumerate(tests):
         name = pathlib.Path(t.source).name if t.source else t.metadata.get("id", "")
-        masked = int(np.sum(~t.mask))
+        masked = int(np.sum(~np.asarray(t.mask)))
         text = f"  {name}: {t.num_samples} samples"
         if every > 1:
             text += f" (1 in {every} kept)"

@@ -17,7 +17,7 @@ import numpy as np
 
 from .._cable import Cable
 from .._diagnose import CandidateSearch
-from .._drive import Protocol, simulate_rate_test
+from .._drive import Protocol, Simulation, simulate_rate_test
 from .._io import TestData, write_csv
 from .._models import PARK_IDENTIFIABLE, IntegratedModel
 from .._problem import LeastSquares, Problem
@@ -114,7 +114,7 @@ def _simulate_case(
     protocol = Protocol.cycles(
         case.force_max, case.cycles, samples_per_ramp=samples_per_ramp
     ).pad(samples)
-    traj = simulate_rate_test(model, cable, protocol, throw=False)
+    traj = simulate_rate_test(model, cable, protocol, method=Simulation(throw=False))
     error = ""
     if traj.result != RESULTS.successful:
         error = RESULTS[traj.result]

@@ -319,12 +319,13 @@ def _design_and_write(known, tests, request: DesignRequest, lab: Lab, targets) -
         cable = tests[0].cable()
         if isinstance(known, Diagnosis):
             designed = design_discriminating_test(known, method, cable=cable)
+            simulated = designed.separation
         else:
             designed = design_test(known, method, cable=cable, targets=targets)
+            simulated = designed.sd_after
     except ValueError as e:
         raise CliError(f"cannot design the test: {e}") from None
     print(designed.summary())
-    simulated = getattr(designed, "sd_after", getattr(designed, "separation", None))
     if not np.all(np.isfinite(simulated)):
         raise CliError("the designed test did not simulate.", status=1)
     out = request.out

@@ -105,7 +105,7 @@ def run_fit(
     printed with its summary), not issued.
     """
     tests = problem.tests
-    n = sum(int(np.sum(t.mask)) for t in tests)
+    n = sum(int(np.sum(np.asarray(t.mask))) for t in tests)
     label = f"fitting {name} to {len(tests)} test(s), {n} samples"
     with (
         meter.bar(label),
@@ -176,15 +176,20 @@ def fit_files(request: FitRequest) -> int:
     outputs = _each_outputs(request) if request.each else _fit_outputs(request)
     refuse_inputs(outputs, input_files(request.data, request.model.params))
     tests, drives = read_described(request.data, meter)
+    if request.each:
+        # One problem per file, each with its test's drive; the same start and names.
+        problems = [
+            Problem(model, (t,), fit_names or None, tuple(per_test), drive=(d.drive,))
+            for t, d in zip(tests, drives)
+        ]
+        return each_files(problems, name, request, outputs, meter)
     problem = Problem(
         model,
         tests,
         fit=fit_names or None,
-        per_test=per_test,
+        per_test=tuple(per_test),
         drive=[d.drive for d in drives],
     )
-    if request.each:
-        return each_files(problem, name, request, outputs, meter)
     problem = data_start(problem, request.model)
     result = run_fit(problem, name, request.method, meter)
     failure = fit_failure(result)
@@ -210,6 +215,8 @@ def fit_files(request: FitRequest) -> int:
         write_params(request.out, result, posterior)
     print(f"wrote {request.out}")
     if request.report:
+        # Said before the folder is made: a folder that cannot be made holds no file.
+        say_replacing([path for _, path in outputs[1:]], "--report")
         _write_fit_report(request, name, result, posterior, problem.tests, meter)
     if failure is not None:
         raise failure
@@ -234,7 +241,6 @@ def _write_fit_report(request, name, result, posterior, tests, meter) -> None:
         notes.append("slack detection off (--no-slack)")
     if request.data.every > 1:
         notes.append(f"1 sample in {request.data.every} fitted (--every)")
-    say_replacing([path for _, path in _fit_outputs(request)[1:]], "--report")
     with write_errors("--report", out):
         written = write_report(
             out,
@@ -366,16 +372,13 @@ def _print_summary(header: list[str], rows: list[list]) -> None:
         )
 
 
-def each_files(problem: Problem, name: str, request: FitRequest, outputs, meter) -> int:
-    """`jaxcable fit --each`: every test of `problem` fitted on its own by one
+def each_files(
+    problems: list[Problem], name: str, request: FitRequest, outputs, meter
+) -> int:
+    """`jaxcable fit --each`: the `problems`, one per data file, fitted by one
     `jaxcable.fit_each`; writes FILE.PARAMS.json per fitted file and summary.csv to
     the `--out` folder (`outputs`, [`_each_outputs`][]); the exit status (1 when a
     fit failed or did not converge)."""
-    # One problem per file, each with its test's drive; the same start and names.
-    problems = [
-        Problem(problem.model, (test,), problem.fit, problem.per_test, drive=(drive,))
-        for test, drive in zip(problem.tests, problem.drive)
-    ]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", IdentifiabilityWarning)
         try:

@@ -22,7 +22,7 @@ import pathlib
 import equinox as eqx
 import numpy as np
 
-from .._drive import Protocol, simulate_rate_test
+from .._drive import Protocol, Simulation, simulate_rate_test
 from .._io import TestData
 from .._models import AbstractCableModel
 from .._results import RESULTS
@@ -86,7 +86,7 @@ def strain_at_load(model: AbstractCableModel, cable, load: float) -> float | Non
     )
     # The ramp itself must not stop at an earlier limit.
     free = eqx.tree_at(lambda c: c.breaking_strain, cable, math.inf)
-    traj = simulate_rate_test(model, free, ramp, throw=False)
+    traj = simulate_rate_test(model, free, ramp, method=Simulation(throw=False))
     strain = float(np.asarray(traj.strain)[-1])
     if traj.result != RESULTS.successful or not (math.isfinite(strain) and strain > 0):
         return None

@@ -3,6 +3,12 @@
 Errors in the user's input (files, arguments) exit with status 2 and one line on
 stderr saying what is wrong and where; a simulation or fit that fails exits with
 status 1.
+
+Each command's entry (`fit_command`, `diagnose_command`, ...) turns the parsed flags
+once into a frozen request of typed values: the model asked for, the data files with
+their `jaxcable.ReadOptions`, the library's method values (`jaxcable.LeastSquares`,
+`jaxcable.NUTS`, `jaxcable.CandidateSearch`) and the output paths. The functions
+below it take these values; no argparse namespace travels further.
 """
 
 import gc

@@ -213,7 +213,7 @@ def resolve_model(
     if isinstance(doc, dict) and doc.get("format") == "jaxcable-params":
         result = _read_fit(path, doc)
         # Every class a PARAMS.json may name is registered, with its name.
-        name = describe(result.model)
+        name = describe(result.model) or type(result.model).__name__
         base = cli_name(innermost(result.model))
         if requested is not None and requested != base:
             raise CliError(

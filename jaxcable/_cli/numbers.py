@@ -5,13 +5,20 @@ checks them; only the wording is the command line's."""
 
 import argparse
 from collections.abc import Callable
+from typing import TypeVar
 
 from .. import _checks
 
 
+_N = TypeVar("_N", int, float)
+
+
 def _parser(
-    convert: type, noun: str, check: Callable[[float], object], requirement: str
-) -> Callable[[str], int | float]:
+    convert: Callable[[str], _N],
+    noun: str,
+    check: Callable[[_N], object],
+    requirement: str,
+) -> Callable[[str], _N]:
     """An argparse `type`: `convert(text)`, refused unless `check(value)` passes.
 
     **Arguments:**
@@ -22,7 +29,7 @@ def _parser(
     - `requirement`: what an acceptable value is, for the error ("must be at least 1").
     """
 
-    def parse(text: str):
+    def parse(text: str) -> _N:
         # A value of thousands of digits is cut short: the error is one line.
         shown = text if len(text) <= 30 else f"{text[:20]}... ({len(text)} characters)"
         try:

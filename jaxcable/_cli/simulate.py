@@ -13,6 +13,7 @@ from .._drive import (
     ELONGATION_DRIVEN,
     FORCE_DRIVEN,
     AbstractTestDrive,
+    Simulation,
     simulate_rate_test,
 )
 from .._io import TestData, read_protocol, resolve_control, write_csv
@@ -24,6 +25,8 @@ from .models import ModelChoice, params_metadata, resolve_model
 from .outputs import refuse_inputs, say_replacing, writing
 
 
+# A failed simulation is reported with its status, naming where it failed.
+_NO_THROW = Simulation(throw=False)
 _PER_TEST = "choose the test to simulate with --test ID (or its index)."
 # The column a channel is written as.
 _COLUMN = {"force": "force_N", "elongation": "elongation_mm"}
@@ -134,7 +137,9 @@ def _simulate_history(request: SimulateRequest) -> int:
     cable = limited.cable()
     # The measured channel as read, as `fit` drives its model: a PARAMS.json
     # re-simulates the file it was fitted to exactly as the fit saw it.
-    traj = drive.simulate(model, cable, data.time, drive.imposed_of(data), throw=False)
+    traj = drive.simulate(
+        model, cable, data.time, drive.imposed_of(data), method=_NO_THROW
+    )
     _check_success(
         traj, name, lambda i: str(request.input) if i is None else data.locate(i)
     )
@@ -194,7 +199,7 @@ def _simulate_protocol(request: SimulateRequest) -> int:
         )
         spec = spec._replace(cable=cable)
     name, model = resolve_model(request.model, per_test_hint=_PER_TEST)
-    traj = simulate_rate_test(model, spec.cable, spec.protocol, throw=False)
+    traj = simulate_rate_test(model, spec.cable, spec.protocol, method=_NO_THROW)
 
     def where(i):
         segment = spec.segment_of(i) if i is not None else None
