@@ -91,15 +91,7 @@ def main():
             def control(
                 state, t, forces, model=model, per_cable=per_cable, throw=throw
             ):
-                return jc.controller_step(
-                    model,
-                    cables,
-                    state,
-                    t,
-                    forces,
-                    per_cable=per_cable,
-                    throw=throw,
-                )
+                return jc.controller_step(model, cables, state, t, forces, throw=throw)
 
             state, _ = control(state, 1.0, forces)
             t = jnp.asarray(2.0, state.cables.time.dtype)

@@ -75,7 +75,9 @@ def main():
     @eqx.filter_jit
     def forward(model, cable):
         traj = jax.vmap(
-            lambda c: jc.simulate_rate_test(model, c, protocol, throw=False)
+            lambda c: jc.simulate_rate_test(
+                model, c, protocol, method=jc.Simulation(throw=False)
+            )
         )(cable)
         return traj.elongation, traj.result
 
@@ -83,7 +85,9 @@ def main():
     def loss_and_grad(model, cable):
         def loss(model):
             traj = jax.vmap(
-                lambda c: jc.simulate_rate_test(model, c, protocol, throw=False)
+                lambda c: jc.simulate_rate_test(
+                    model, c, protocol, method=jc.Simulation(throw=False)
+                )
             )(cable)
             return jnp.mean(traj.elongation**2)
 

@@ -31,7 +31,9 @@ FORCES = (100.0, 150.0, 200.0, 400.0, 600.0)  # N: 5-30 % of 2000 N
 def hold(model, cable, force, days, samples):
     time = np.concatenate([[0.0], np.geomspace(1.0, days * DAY, samples)])
     f = np.minimum(force * time / 60.0, force)
-    traj = jc.simulate_force_history(model, cable, time, f, throw=False)
+    traj = jc.simulate_force_history(
+        model, cable, time, f, method=jc.Simulation(throw=False)
+    )
     strain = np.asarray(traj.strain)
 
     def at(t):

@@ -110,13 +110,15 @@ def main():
             bins=args.bins,
             method=args.method,
             devices=devices,
-            progress_meter=jc.TextProgressMeter() if progress else jc.NoProgressMeter(),
         )
+        meter = jc.TextProgressMeter() if progress else jc.NoProgressMeter()
+        warm = jc.MonteCarlo(num_draws=min(chunk, draws), **kw)
         t0 = time.perf_counter()
-        jc.monte_carlo(sampler, cables, loads, num_draws=min(chunk, draws), **kw)
+        jc.monte_carlo(sampler, cables, loads, warm, progress_meter=meter)
         first = time.perf_counter() - t0
+        method = jc.MonteCarlo(num_draws=draws, **kw)
         t0 = time.perf_counter()
-        res = jc.monte_carlo(sampler, cables, loads, num_draws=draws, **kw)
+        res = jc.monte_carlo(sampler, cables, loads, method, progress_meter=meter)
         elapsed = time.perf_counter() - t0
         return res, elapsed, first
 
@@ -163,12 +165,14 @@ def main():
         def per_draw(m):
             if args.driver == "force":
                 sim = lambda c, tt, ff: jc.simulate_force_history(
-                    m, c, tt, ff, throw=False
+                    m, c, tt, ff, method=jc.Simulation(throw=False)
                 )
                 traj = jax.vmap(sim)(cables_b, loads.time, loads.force)
             else:
                 traj = jax.vmap(
-                    lambda c: jc.simulate_rate_test(m, c, loads, throw=False)
+                    lambda c: jc.simulate_rate_test(
+                        m, c, loads, method=jc.Simulation(throw=False)
+                    )
                 )(cables_b)
             return traj.elongation, traj.result == jc.RESULTS.successful
 

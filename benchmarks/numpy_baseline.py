@@ -375,7 +375,11 @@ def main():
             jc.Cable(length=jnp.asarray(lengths), speed=jnp.asarray(speeds)),
         )
         run = jax.jit(
-            jax.vmap(lambda c: jc.simulate_rate_test(model, c, protocol, throw=False))
+            jax.vmap(
+                lambda c: jc.simulate_rate_test(
+                    model, c, protocol, method=jc.Simulation(throw=False)
+                )
+            )
         )
         traj = jax.block_until_ready(run(cable))
         times = []

@@ -524,7 +524,9 @@ def jaxcable_forward(protocol):
     import jax
 
     def forward(model, cable):
-        simulate = lambda c: jc.simulate_rate_test(model, c, protocol, throw=False)
+        simulate = lambda c: jc.simulate_rate_test(
+            model, c, protocol, method=jc.Simulation(throw=False)
+        )
         traj = jax.vmap(simulate)(cable)
         return traj.elongation, traj.result
 

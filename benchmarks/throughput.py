@@ -117,7 +117,9 @@ def main():
 
     def forward(model, cable, protocol):
         traj = jax.vmap(
-            lambda c: jc.simulate_rate_test(model, c, protocol, throw=False)
+            lambda c: jc.simulate_rate_test(
+                model, c, protocol, method=jc.Simulation(throw=False)
+            )
         )(cable)
         return traj.elongation, traj.result
 

@@ -188,17 +188,27 @@ def capture(out, stage):
             except Exception as e:
                 print("skip", name, type(e).__name__, e)
                 continue
-            traj = jc.simulate_rate_test(model, cable, proto, throw=False)
+            # Either tree's signature: `method=` (a jc.Simulation) or `throw=`.
+            quiet = (
+                dict(method=jc.Simulation(throw=False))
+                if hasattr(jc, "Simulation")
+                else dict(throw=False)
+            )
+            traj = jc.simulate_rate_test(model, cable, proto, **quiet)
             for f in ("time", "force", "elongation", "strain"):
                 if hasattr(traj, f):
                     arrays[f"rate/{name}/{f}"] = np.asarray(getattr(traj, f))
             t = np.asarray(traj.time)
             F = np.asarray(traj.force)
             try:
-                tf = jc.simulate_force_history(model, cable, t, F, throw=False)
+                tf = jc.simulate_force_history(model, cable, t, F, **quiet)
                 arrays[f"force/{name}/elongation"] = np.asarray(tf.elongation)
                 te = jc.simulate_elongation_history(
-                    model, cable, t, np.asarray(tf.elongation), throw=False
+                    model,
+                    cable,
+                    t,
+                    np.asarray(tf.elongation),
+                    **quiet,
                 )
                 arrays[f"elong/{name}/force"] = np.asarray(te.force)
             except ValueError as e:
@@ -250,10 +260,17 @@ def capture(out, stage):
             method="exact",
             keep_draws=True,
         )
-        try:
-            mc = jc.monte_carlo(**kw, progress=False)
-        except TypeError:
-            mc = jc.monte_carlo(**kw)
+        if hasattr(jc, "MonteCarlo"):
+            fields = ("key", "num_draws", "chunk_size", "method", "keep_draws")
+            method = jc.MonteCarlo(**{f: kw.pop(f) for f in fields})
+            mc = jc.monte_carlo(
+                **kw, method=method, progress_meter=jc.NoProgressMeter()
+            )
+        else:
+            try:
+                mc = jc.monte_carlo(**kw, progress=False)
+            except TypeError:
+                mc = jc.monte_carlo(**kw)
         for f in ("draws", "percentiles", "mean", "std", "num_broken", "status_counts"):
             v = getattr(mc, f, None)
             if v is not None and not isinstance(v, dict):

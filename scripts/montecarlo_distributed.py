@@ -197,21 +197,21 @@ def main(argv=None):
         chunk_size=args.chunk_size,
         method=args.method,
         bins=args.bins,
-        progress_meter=(
-            jc.TextProgressMeter()
-            if args.progress and index == 0
-            else jc.NoProgressMeter()
-        ),
+    )
+    meter = (
+        jc.TextProgressMeter() if args.progress and index == 0 else jc.NoProgressMeter()
     )
     first = None
     if args.warmup:
         # One chunk, the same shapes: compiles the chunk function outside the timing.
         t0 = time.perf_counter()
         warm = args.chunk_size or args.draws
-        jc.monte_carlo(sampler, cables, loads, num_draws=min(warm, args.draws), **kw)
+        method = jc.MonteCarlo(num_draws=min(warm, args.draws), **kw)
+        jc.monte_carlo(sampler, cables, loads, method, progress_meter=meter)
         first = time.perf_counter() - t0
     t0 = time.perf_counter()
-    res = jc.monte_carlo(sampler, cables, loads, num_draws=args.draws, **kw)
+    method = jc.MonteCarlo(num_draws=args.draws, **kw)
+    res = jc.monte_carlo(sampler, cables, loads, method, progress_meter=meter)
     elapsed = time.perf_counter() - t0
     out = dict(
         process_count=count,

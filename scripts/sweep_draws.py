@@ -97,12 +97,17 @@ def one(params, length_mm, rate_mm_per_min, peak):
     protocol = eqx.tree_at(
         lambda p: p.force, PROTOCOL, PROTOCOL.force * peak * cable.breaking_load
     )
-    rate = jc.simulate_rate_test(model, cable, protocol, throw=False)
+    rate = jc.simulate_rate_test(
+        model, cable, protocol, method=jc.Simulation(throw=False)
+    )
     robust = jc.simulate_rate_test(
-        model, cable, protocol, throw=False, solver=ROBUST_SOLVER
+        model, cable, protocol, method=jc.Simulation(solver=ROBUST_SOLVER, throw=False)
     )
     two_pass = jc.simulate_rate_test(
-        model, cable, protocol, throw=False, solver=TWO_PASS_SOLVER
+        model,
+        cable,
+        protocol,
+        method=jc.Simulation(solver=TWO_PASS_SOLVER, throw=False),
     )
 
     # The solver-free check: the state before each sample, from the same drive.
@@ -139,9 +144,15 @@ def one(params, length_mm, rate_mm_per_min, peak):
     ok = rate.result == jc.RESULTS.successful
     time_ = jnp.where(ok, rate.time, jnp.arange(rate.time.shape[0], dtype=float))
     force = jnp.where(ok, rate.force, 0.0)
-    by_force = jc.simulate_force_history(model, cable, time_, force, throw=False)
+    by_force = jc.simulate_force_history(
+        model, cable, time_, force, method=jc.Simulation(throw=False)
+    )
     by_elongation = jc.simulate_elongation_history(
-        model, cable, time_, jnp.where(ok, rate.elongation, 0.0), throw=False
+        model,
+        cable,
+        time_,
+        jnp.where(ok, rate.elongation, 0.0),
+        method=jc.Simulation(throw=False),
     )
     scale_f = peak * cable.breaking_load
     both_ok = (rate.result == jc.RESULTS.successful) & (

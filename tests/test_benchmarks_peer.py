@@ -64,7 +64,7 @@ def test_peer_numba_matches_jaxcable_through_holds_rests_and_fallback():
         solver = jc.Newton(tol=1e-12, max_steps=max_steps)
         traj = jax.vmap(
             lambda c: jc.simulate_rate_test(
-                model, c, protocol, solver=solver, throw=False
+                model, c, protocol, method=jc.Simulation(solver=solver, throw=False)
             )
         )(cables)
         out = peer_numba.simulate_rate_test_numba(

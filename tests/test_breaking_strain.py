@@ -34,7 +34,7 @@ def _cable(breaking_strain, **kwargs):
 
 def _held(breaking_strain, throw=False):
     return jc.simulate_force_history(
-        MODEL, _cable(breaking_strain), TIME, HELD, throw=throw
+        MODEL, _cable(breaking_strain), TIME, HELD, method=jc.Simulation(throw=throw)
     )
 
 
@@ -56,7 +56,7 @@ def test_force_history_beyond_break(unbroken):
         _held(TINY, throw=True)
     # The default breaking strain is crossed too (the held strain reaches ~150).
     default = jc.simulate_force_history(
-        MODEL, jc.Cable(length=LENGTH), TIME, HELD, throw=False
+        MODEL, jc.Cable(length=LENGTH), TIME, HELD, method=jc.Simulation(throw=False)
     )
     assert default.result == jc.RESULTS.strain_beyond_break
     # The check reads the result only: every number is the unbroken simulation's.
@@ -76,7 +76,9 @@ def test_one_result_per_cable_under_vmap(unbroken):
         _cable(jnp.array([TINY, math.inf, 2.0, 1e3])),
     )
     traj = jax.vmap(
-        lambda c: jc.simulate_force_history(MODEL, c, TIME, HELD, throw=False)
+        lambda c: jc.simulate_force_history(
+            MODEL, c, TIME, HELD, method=jc.Simulation(throw=False)
+        )
     )(cables)
     # 2.0 is passed at the first sample beyond it, 1e3 never.
     strain = np.asarray(unbroken.strain)
@@ -93,7 +95,9 @@ def test_first_failure_is_kept():
     # flagged in the kernel: whichever of it and the break comes first is reported.
     @jax.jit
     def result(force):
-        traj = jc.simulate_force_history(MODEL, _cable(TINY), TIME, force, throw=False)
+        traj = jc.simulate_force_history(
+            MODEL, _cable(TINY), TIME, force, method=jc.Simulation(throw=False)
+        )
         return traj.result
 
     negative_first = np.where(np.arange(11) == 1, -1.0, np.where(TIME > 3e4, 10.0, 0.0))
@@ -112,12 +116,14 @@ def test_solved_drives_beyond_break(drive):
         cable = _cable(breaking_strain, speed=speed)
         if drive == "rate":
             protocol = jc.Protocol.cycles(100.0, 1, 5)
-            return jc.simulate_rate_test(MODEL, cable, protocol, throw=throw)
+            return jc.simulate_rate_test(
+                MODEL, cable, protocol, method=jc.Simulation(throw=throw)
+            )
         # An imposed strain up to 2e-3: beyond TINY whatever the model.
         time = np.linspace(0.0, 60.0, 7)
         elongation = np.linspace(0.0, 2e-3 * LENGTH, 7)
         return jc.simulate_elongation_history(
-            MODEL, cable, time, elongation, throw=throw
+            MODEL, cable, time, elongation, method=jc.Simulation(throw=throw)
         )
 
     unbroken = run(math.inf)
@@ -177,11 +183,13 @@ def test_monte_carlo_counts_the_broken_draws():
             sampler,
             cables,
             loads,
-            key=jax.random.key(0),
-            num_draws=num_draws,
-            method="exact",
-            keep_draws=True,
             progress_meter=jc.NoProgressMeter(),
+            method=jc.MonteCarlo(
+                key=jax.random.key(0),
+                num_draws=num_draws,
+                method="exact",
+                keep_draws=True,
+            ),
         )
 
     free = run([math.inf, math.inf])

@@ -39,7 +39,7 @@ def _loop(model, cables, t, forces, per_cable):
 
     def body(state, x):
         ti, fi = x
-        return controller_step(model, cables, state, ti, fi, per_cable=per_cable)
+        return controller_step(model, cables, state, ti, fi)
 
     return jax.lax.scan(body, state, (t, forces.T))
 
@@ -221,9 +221,12 @@ def test_bad_inputs_raise_value_error(kwargs, match):
         per_cable=False,
     )
     args.update(kwargs)
-    per_cable = args.pop("per_cable")
+    if args.pop("per_cable"):
+        # A state of one parameter set per cable, stepped with a shared model.
+        stacked = jax.tree_util.tree_map(lambda x: jnp.stack([x] * 3), model)
+        args["state"] = controller_init(stacked, _cables(), per_cable=True)
     with pytest.raises(ValueError, match=match):
-        controller_step(**args, per_cable=per_cable)
+        controller_step(**args)
 
 
 def test_init_bad_inputs():

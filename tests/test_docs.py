@@ -90,9 +90,17 @@ def test_python_blocks_run(page, tmp_path, monkeypatch):
             ) from error
 
 
+def _api_text() -> str:
+    return "\n".join(p.read_text() for p in sorted((DOCS / "api").glob("*.md")))
+
+
 def _documented() -> set[str]:
-    text = "\n".join(p.read_text() for p in (DOCS / "api").glob("*.md"))
-    return set(re.findall(r"^::: (jaxcable(?:\.\w+)+)", text, re.M))
+    """The names the API reference renders under their public path: `::: NAME`, or an
+    anchor `[](){#NAME}` above the rendering of the name's full path."""
+    text = _api_text()
+    rendered = re.findall(r"^::: (jaxcable(?:\.\w+)+)", text, re.M)
+    anchored = re.findall(r"^\[\]\(\)\{#(jaxcable(?:\.\w+)+)\}", text, re.M)
+    return set(rendered) | set(anchored)
 
 
 def _public(module) -> set[str]:
@@ -171,3 +179,17 @@ def test_site_builds_strict(tmp_path):
         warnings or done.stderr.splitlines()[-20:]
     )
     assert (tmp_path / "site" / "api" / "fitting" / "index.html").is_file()
+
+
+def test_no_public_path_renders_a_module_of_the_same_name():
+    # `from .fit import fit` in a package makes griffe resolve `jaxcable.fit` to the
+    # module fit.py, whose every helper the page would then show: such a name is
+    # rendered by its full path under an anchor of its public path.
+    clashes = []
+    for path in re.findall(r"^::: (jaxcable(?:\.\w+)+)", _api_text(), re.M):
+        parent, name = path.rsplit(".", 1)
+        obj = getattr(importlib.import_module(parent), name, None)
+        module = getattr(obj, "__module__", "") or ""
+        if callable(obj) and module.split(".")[-1] == name and module != parent:
+            clashes.append(path)
+    assert not clashes, f"render these by their full path under an anchor: {clashes}"

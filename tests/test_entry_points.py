@@ -120,11 +120,10 @@ def test_every_entry_point_gives_the_same_elongations(tmp_path):
         _Nominal(model),
         cable,
         jc.ForceHistory(time, force),
-        key=jax.random.key(0),
-        num_draws=1,
-        method="exact",
-        keep_draws=True,
         progress_meter=jc.NoProgressMeter(),
+        method=jc.MonteCarlo(
+            key=jax.random.key(0), num_draws=1, method="exact", keep_draws=True
+        ),
     )
     assert mc.elongation.shape == (1, 1, n)
     _close("monte_carlo", mc.elongation[0, 0], reference)

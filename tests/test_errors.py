@@ -103,7 +103,9 @@ def test_parameter_out_of_domain_raises_and_reports():
     model = _bad_tr2_model()
     with pytest.raises(Exception, match="t_r2"):
         jc.simulate_force_history(model, CABLE, T, F)
-    traj = jc.simulate_force_history(model, CABLE, T, F, throw=False)
+    traj = jc.simulate_force_history(
+        model, CABLE, T, F, method=jc.Simulation(throw=False)
+    )
     assert traj.result == jc.RESULTS.parameter_out_of_domain
 
 
@@ -112,9 +114,11 @@ def test_per_sample_status_in_a_batch():
     # set carries its own status.
     good, bad = MODEL, _bad_tr2_model()
     stacked = jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), good, bad, good)
-    trajs = jax.vmap(lambda m: jc.simulate_force_history(m, CABLE, T, F, throw=False))(
-        stacked
-    )
+    trajs = jax.vmap(
+        lambda m: jc.simulate_force_history(
+            m, CABLE, T, F, method=jc.Simulation(throw=False)
+        )
+    )(stacked)
     ok = trajs.result == jc.RESULTS.successful
     np.testing.assert_array_equal(ok, [True, False, True])
     assert np.all(np.isfinite(trajs.strain[0]))
@@ -134,7 +138,9 @@ def test_force_out_of_reach_is_physics_not_a_solver_failure(ratio):
     # Coarse samples (every 60 N), so that none lies just below the force
     # peak / ratio where the crosshead takes hours to catch up.
     protocol = jc.Protocol.cycles(peak, 1, 5)
-    traj = jc.simulate_rate_test(model, UNBREAKABLE, protocol, throw=False)
+    traj = jc.simulate_rate_test(
+        model, UNBREAKABLE, protocol, method=jc.Simulation(throw=False)
+    )
     if ratio < 1:
         assert traj.result == jc.RESULTS.successful
         return
@@ -156,16 +162,22 @@ def test_solve_beyond_twice_the_length_is_flagged():
         jc.Protocol.cycles(1500.0, 1, 10), jc.Protocol.hold(1500.0, 3600.0, 6)
     )
     fast = jc.Cable(length=0.3, speed=50e-3 / 60, breaking_strain=math.inf)
-    traj = jc.simulate_rate_test(model, fast, protocol, throw=False)
+    traj = jc.simulate_rate_test(
+        model, fast, protocol, method=jc.Simulation(throw=False)
+    )
     assert traj.result == jc.RESULTS.nonphysical_strain
     assert np.max(traj.strain) > 1.0
     with pytest.raises(Exception, match="above 1"):
         jc.simulate_rate_test(model, fast, protocol)
     # With a breaking strain, its crossing (on the first ramp) comes first.
     brittle = jc.Cable(length=0.3, speed=50e-3 / 60, breaking_strain=0.05)
-    broken = jc.simulate_rate_test(model, brittle, protocol, throw=False)
+    broken = jc.simulate_rate_test(
+        model, brittle, protocol, method=jc.Simulation(throw=False)
+    )
     assert broken.result == jc.RESULTS.strain_beyond_break
-    slow = jc.simulate_rate_test(model, UNBREAKABLE, protocol, throw=False)
+    slow = jc.simulate_rate_test(
+        model, UNBREAKABLE, protocol, method=jc.Simulation(throw=False)
+    )
     assert slow.result == jc.RESULTS.unreachable_force
     # Up to 1200 N (reached) the strain stays below 1.
     assert 0.0 < float(slow.strain[8]) < 1.0
@@ -178,7 +190,11 @@ def test_traced_nonfinite_force_is_flagged_not_silent():
     # Inside a user's jit the Python checks cannot see values; the kernel flags them.
     f = jnp.asarray(F).at[4].set(jnp.nan)
     run = jax.jit(
-        lambda f: jc.simulate_force_history(MODEL, CABLE, T, f, throw=False).result
+        lambda f: (
+            jc.simulate_force_history(
+                MODEL, CABLE, T, f, method=jc.Simulation(throw=False)
+            ).result
+        )
     )
     assert run(f) != jc.RESULTS.successful
     with pytest.raises(Exception, match="force|strain"):
@@ -188,7 +204,11 @@ def test_traced_nonfinite_force_is_flagged_not_silent():
 def test_traced_decreasing_time_is_flagged():
     t = jnp.asarray(T).at[5].set(-1.0)
     res = jax.jit(
-        lambda t: jc.simulate_force_history(MODEL, CABLE, t, F, throw=False).result
+        lambda t: (
+            jc.simulate_force_history(
+                MODEL, CABLE, t, F, method=jc.Simulation(throw=False)
+            ).result
+        )
     )(t)
     assert res == jc.RESULTS.nonphysical_time
 
@@ -196,7 +216,10 @@ def test_traced_decreasing_time_is_flagged():
 def test_bad_solver_type():
     with pytest.raises(ValueError, match="solver"):
         jc.simulate_rate_test(
-            MODEL, CABLE, jc.Protocol.cycles(100.0, 1, 10), solver="newton"
+            MODEL,
+            CABLE,
+            jc.Protocol.cycles(100.0, 1, 10),
+            method=jc.Simulation(solver="newton"),
         )
 
 
@@ -206,6 +229,9 @@ def test_optimistix_solver_agrees_with_builtin_newton():
     protocol = jc.Protocol.cycles(100.0, 1, 20)
     a = jc.simulate_rate_test(MODEL, CABLE, protocol)
     b = jc.simulate_rate_test(
-        MODEL, CABLE, protocol, solver=optx.Newton(rtol=1e-12, atol=1e-12)
+        MODEL,
+        CABLE,
+        protocol,
+        method=jc.Simulation(solver=optx.Newton(rtol=1e-12, atol=1e-12)),
     )
     np.testing.assert_allclose(a.time, b.time, rtol=1e-9)

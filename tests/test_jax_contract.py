@@ -88,7 +88,11 @@ def test_one_scan_per_simulation():
     def size(n):
         protocol = jc.Protocol.cycles(100.0, 1, samples_per_ramp=n)
         jaxpr = jax.make_jaxpr(
-            lambda m: jc.simulate_rate_test(m, CABLE, protocol, throw=False).strain
+            lambda m: (
+                jc.simulate_rate_test(
+                    m, CABLE, protocol, method=jc.Simulation(throw=False)
+                ).strain
+            )
         )(model)
         return str(jaxpr).count("scan["), len(jaxpr.jaxpr.eqns)
 

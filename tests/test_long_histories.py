@@ -19,7 +19,9 @@ def _history(n):
 
 
 def _loss(model, t, f, checkpoint):
-    traj = jc.simulate_force_history(model, CABLE, t, f, checkpoint=checkpoint)
+    traj = jc.simulate_force_history(
+        model, CABLE, t, f, method=jc.Simulation(checkpoint=checkpoint)
+    )
     return jnp.mean(traj.elongation**2) * 1e6
 
 
@@ -28,7 +30,9 @@ def test_checkpointed_equals_plain(checkpoint):
     model = jc.IntegratedModel()
     t, f = _history(250)
     plain = jc.simulate_force_history(model, CABLE, t, f)
-    ckpt = jc.simulate_force_history(model, CABLE, t, f, checkpoint=checkpoint)
+    ckpt = jc.simulate_force_history(
+        model, CABLE, t, f, method=jc.Simulation(checkpoint=checkpoint)
+    )
     np.testing.assert_allclose(ckpt.strain, plain.strain, rtol=1e-13)
     g0 = eqx.filter_grad(_loss)(model, t, f, None)
     g1 = eqx.filter_grad(_loss)(model, t, f, checkpoint)
@@ -40,7 +44,9 @@ def test_checkpointed_rate_test_equals_plain():
     model = jc.IntegratedModel()
     protocol = jc.Protocol.cycles(100.0, 2, 50)
     plain = jc.simulate_rate_test(model, CABLE, protocol)
-    ckpt = jc.simulate_rate_test(model, CABLE, protocol, checkpoint=16)
+    ckpt = jc.simulate_rate_test(
+        model, CABLE, protocol, method=jc.Simulation(checkpoint=16)
+    )
     np.testing.assert_allclose(ckpt.time, plain.time, rtol=1e-12)
 
 
@@ -70,4 +76,6 @@ def test_checkpointed_gradient_memory_is_bounded():
 def test_bad_checkpoint():
     t, f = _history(10)
     with pytest.raises(ValueError, match="checkpoint"):
-        jc.simulate_force_history(jc.IntegratedModel(), CABLE, t, f, checkpoint=0)
+        jc.simulate_force_history(
+            jc.IntegratedModel(), CABLE, t, f, method=jc.Simulation(checkpoint=0)
+        )

@@ -49,20 +49,30 @@ def _sampler(lambda2=(1.5e4, 2.5e4)):
     )
 
 
+# The fields of jc.MonteCarlo among `_run`'s keywords.
+_METHOD_FIELDS = (
+    "key", "num_draws", "percentiles", "chunk_size", "method", "bins", "keep_draws",
+    "devices",
+)  # fmt: skip
+
+
 def _run(**kwargs):
     args = dict(
         parameters=_sampler(),
         cables=CABLES,
         loads=LOADS,
+        progress_meter=jc.NoProgressMeter(),
+    )
+    fields = dict(
         key=jax.random.key(0),
         num_draws=NUM_DRAWS,
         chunk_size=CHUNK,
         method="exact",
         keep_draws=True,
-        progress_meter=jc.NoProgressMeter(),
     )
-    args.update(kwargs)
-    return jc.monte_carlo(**args)
+    for name, value in kwargs.items():
+        (fields if name in _METHOD_FIELDS else args)[name] = value
+    return jc.monte_carlo(**args, method=jc.MonteCarlo(**fields))
 
 
 @pytest.fixture(scope="module")
@@ -83,7 +93,11 @@ def _reference(parameters, cables, loads, key, num_draws):
                 breaking_strain=UNBREAKABLE,
             )
             traj = jc.simulate_force_history(
-                model, cable, loads.time[j], loads.force[j], throw=False
+                model,
+                cable,
+                loads.time[j],
+                loads.force[j],
+                method=jc.Simulation(throw=False),
             )
             if traj.result == jc.RESULTS.successful:
                 out[i, j] = np.asarray(traj.elongation)
@@ -179,10 +193,12 @@ def test_rate_test_with_correlated_parameters():
         breaking_strain=UNBREAKABLE,
     )
     key = jax.random.key(7)
+    method = jc.MonteCarlo(
+        key=key, num_draws=6, chunk_size=4, method="exact", keep_draws=True
+    )
     res = jc.monte_carlo(
-        sampler, cables, protocol, key=key, num_draws=6, chunk_size=4,
-        method="exact", keep_draws=True, progress_meter=jc.NoProgressMeter(),
-    )  # fmt: skip
+        sampler, cables, protocol, method, progress_meter=jc.NoProgressMeter()
+    )
     elong = np.zeros((6, 2, protocol.num_samples))
     times = np.zeros_like(elong)
     for i in range(6):
@@ -269,7 +285,8 @@ def test_correlated_parameters_reproduce_the_covariance():
     ],
 )
 def test_bad_inputs_raise(kwargs, match):
-    with pytest.raises(ValueError, match=match):
+    # A count that is not an integer is a TypeError.
+    with pytest.raises((ValueError, TypeError), match=match):
         _run(**kwargs)
 
 

@@ -118,7 +118,9 @@ def test_park_protocol_simulates(length, rate_mm_per_min, force):
     cable = jc.Cable(length=length, speed=rate_mm_per_min * 1e-3 / 60)
     for rest_hours in (24.0, 48.0, 72.0):
         protocol = park_protocol(force, rest_hours=rest_hours, samples_per_ramp=50)
-        traj = jc.simulate_rate_test(jc.IntegratedModel(), cable, protocol, throw=False)
+        traj = jc.simulate_rate_test(
+            jc.IntegratedModel(), cable, protocol, method=jc.Simulation(throw=False)
+        )
         assert traj.result == jc.RESULTS.successful, (rest_hours, traj.result)
 
 

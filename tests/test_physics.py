@@ -19,7 +19,9 @@ DAY = 86400.0
 def _elongation(model, time, force):
     # throw=False: the linear baselines pass the breaking strain over a day at
     # 300 N; monotonicity holds beyond it all the same.
-    return jc.simulate_force_history(model, CABLE, time, force, throw=False).elongation
+    return jc.simulate_force_history(
+        model, CABLE, time, force, method=jc.Simulation(throw=False)
+    ).elongation
 
 
 def _history(dts, levels):
@@ -112,7 +114,11 @@ def test_hold_near_the_breaking_load_is_flagged():
         0.95 * float(jc.Cable(length=0.3).breaking_load), days=1.0, samples=40
     )
     traj = jc.simulate_force_history(
-        jc.IntegratedModel(), jc.Cable(length=0.3), time, f, throw=False
+        jc.IntegratedModel(),
+        jc.Cable(length=0.3),
+        time,
+        f,
+        method=jc.Simulation(throw=False),
     )
     assert traj.result == jc.RESULTS.strain_beyond_break
     with pytest.raises(Exception, match="breaking strain"):

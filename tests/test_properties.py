@@ -34,7 +34,9 @@ steps = st.lists(st.floats(0.1, 500.0), min_size=N - 1, max_size=N - 1)
 
 @jax.jit
 def _force_strain(model, time, force):
-    return jc.simulate_force_history(model, CABLE, time, force, throw=False)
+    return jc.simulate_force_history(
+        model, CABLE, time, force, method=jc.Simulation(throw=False)
+    )
 
 
 def _times(dts):

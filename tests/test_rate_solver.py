@@ -53,7 +53,9 @@ def test_unloading_with_strong_short_recovery_converges():
     model = jc.IntegratedModel(E2r=5e8, t_r1=2.0)
     cable = jc.Cable(length=0.3, speed=10e-3 / 60)
     protocol = jc.Protocol.cycles(100.0, 2, 50)
-    traj = jc.simulate_rate_test(model, cable, protocol, throw=False)
+    traj = jc.simulate_rate_test(
+        model, cable, protocol, method=jc.Simulation(throw=False)
+    )
     assert traj.result == jc.RESULTS.successful
     # The recovery is strong: it takes a sizeable share of the peak strain.
     assert np.max(traj.parts.recovery_short) > 0.05 * np.max(traj.strain)

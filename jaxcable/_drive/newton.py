@@ -12,6 +12,7 @@ import optimistix as optx
 from jax.ad_checkpoint import checkpoint_name
 from jaxtyping import Array, Bool, Float
 
+from .. import _checks
 from .optimistix_root import optimistix_root
 from .root_derivatives import aux_at_root, evaluate_where, implicit_root
 from .root_solver import (
@@ -79,14 +80,9 @@ class Newton(eqx.Module):
     two_pass: bool | None = None
 
     def __check_init__(self):
-        for name, least in (("max_steps", 1), ("unrolled", 1)):
-            value = getattr(self, name)
-            if name == "unrolled" and value is None:
-                continue
-            if not isinstance(value, int) or isinstance(value, bool) or value < least:
-                raise ValueError(
-                    f"Newton: `{name}` must be an int >= {least}, got {value!r}."
-                )
+        _checks.require_int("max_steps", self.max_steps, 1)
+        if self.unrolled is not None:
+            _checks.require_int("unrolled", self.unrolled, 1)
         if self.two_pass not in (None, True, False):
             raise ValueError(
                 f"Newton: `two_pass` must be None, True or False, got {self.two_pass!r}."
@@ -153,6 +149,11 @@ def root_scalar(
     known: Float[Array, ""] | None = None,
 ) -> RootResult:
     """Solve fn(y, args) = 0 for a scalar lower <= y <= upper.
+
+    With jaxcable's `Newton`, two solvers with optimistix's init / step / terminate
+    contract run in turn (`root_solver.NewtonSteps`, then, where it failed,
+    `root_solver.BracketBisection`): `solver.steps_unrolled` steps with no loop,
+    then each in a `lax.while_loop` (`root_solver.iterate`).
 
     `slope_sign` (+1 or -1), where known, is the sign of fn's slope at the wanted
     root. Where the slope at an iterate has the other sign (or is zero), the root
