@@ -11,6 +11,7 @@ Two halves with the same domains:
 """
 
 import jax
+import jax.core  # jax imports it; named here for a type checker
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool
