@@ -154,7 +154,7 @@ def _start_fit(problem: Problem, start: FitResult | None, labels) -> FitResult:
     """`start`, or the least-squares fit of `problem` (default method) run here;
     checked against the sampled parameters `labels`."""
     if start is None:
-        # As the command line reports it, identifiability shows in the posterior.
+        # What the data do not identify shows in the posterior itself.
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", IdentifiabilityWarning)
             start = least_squares(problem, LeastSquares(), throw=False)
@@ -179,7 +179,8 @@ def _chain_starts(density, lsq, start: FitResult, method: NUTS, key) -> tuple:
     cov = _laplace(start, lsq, float(method.prior_scale))
     u_hat, cov = posterior_mode(density, u_hat, cov)
     z = np.asarray(jax.random.normal(key, (method.num_chains, len(u_hat))))
-    # A draw outside the model's domain is moved to a valid start by run_chains.
+    # The first chain starts at the mode; a draw outside the model's domain is moved
+    # there by run_chains.
     positions = u_hat + z @ np.linalg.cholesky(cov).T
     positions[0] = u_hat
     return positions, cov
@@ -275,7 +276,7 @@ def sample_posterior(
         list(problem.tests),
         problem.fit,
         None,
-        problem.transform_map or None,
+        problem.transform_map,
         problem.drive,
         problem.covariate,
     )
