@@ -19,7 +19,7 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import PRNGKeyArray
 
-from .._drive import FORCE_DRIVEN
+from .._drive import FORCE_DRIVEN, Simulation
 from .._models import MODELS, AbstractCableModel, transform_table
 from .._problem import LeastSquares, Problem
 from .._results import RESULTS
@@ -63,7 +63,11 @@ def _require_valid_start(out: KernelOut, tests: list, problem: ResidualProblem) 
     test, drive = tests[i], problem.data.drive[i]
     model = eqx.combine(problem.base, problem.static)
     traj = drive.simulate(
-        model, test.cable(), test.time, drive.imposed_of(test), throw=False
+        model,
+        test.cable(),
+        test.time,
+        drive.imposed_of(test),
+        method=Simulation(throw=False),
     )
     reason = str(RESULTS[traj.result]) or (
         "the simulation is not finite or a parameter is outside its domain for this "

@@ -8,6 +8,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._drive import Simulation
 from .._models import AbstractCableModel
 from .._results import RESULTS
 from .data import PaddedTests, test_id
@@ -128,7 +129,11 @@ def start_failure(model, tests: list, drives, ok: np.ndarray) -> RESULTS:
     i = int(np.flatnonzero(~ok)[0])
     test, drive = tests[i], drives[i]
     traj = drive.simulate(
-        model, test.cable(), test.time, drive.imposed_of(test), throw=False
+        model,
+        test.cable(),
+        test.time,
+        drive.imposed_of(test),
+        method=Simulation(throw=False),
     )
     result = concrete_result(jax.device_get(traj.result))
     # The residuals were not finite although the simulation succeeded: a start
