@@ -13,11 +13,11 @@ limit (`HIDDEN_EFFECTS[effect]["size"]`, the size named in >= 9 of 10 seeds), in
 strength: the size parameter times the multiple, except for `second_retardation`,
 whose E_k (a stiffness) is divided by it. Every multiple is 3-10. They were chosen so
 that each effect stays clearly visible beside the other: the base with the other
-effect alone (its parameters fitted with the base's, `diagnose(tests,
-candidates=[other], discover=False, max_rounds=1)`) still misses it, its held-out
-RMSE at least twice the floor (the true model's, driven by the recorded force). At
-4x every effect of every pair is missed by 3.5-10x the floor with the other fitted
-(seeds 100 and 101, the range over the two; floor 5.6-5.7 um;
+effect alone (its parameters fitted with the base's, `diagnose(problem,
+CandidateSearch(candidates=[other], discover=False, max_rounds=1))`) still misses
+it, its held-out RMSE at least twice the floor (the true model's, driven by the
+recorded force). At 4x every effect of every pair is missed by 3.5-10x the floor
+with the other fitted (seeds 100 and 101, the range over the two; floor 5.6-5.7 um;
 `python scripts/hidden_effect_excess.py --pairs all --seeds 2 --jobs 2`):
 
 | pair (a, b) | size a | size b | a missed, with b | b missed, with a | base / floor |

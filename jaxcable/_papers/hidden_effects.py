@@ -66,7 +66,8 @@ and humidity, as a diagnosis drives a model: 5 um of elongation noise plus the
 response to the force noise, and for `mechano_sorptive` the humidity seen only at the
 samples), on every seed. Measured under load on 2 shared CPU cores with
 `python scripts/hidden_effect_excess.py --seeds 10 --jobs 2` (seeds 100-109, the base
-`IntegratedModel` fitted by `jaxcable.diagnose(tests, candidates=[])`):
+`IntegratedModel` fitted by
+`jaxcable.diagnose(problem, CandidateSearch(candidates=[]))`):
 
 | effect | size | base / floor, median (min-max) | >= 2x | floor, um |
 | --- | ---: | ---: | ---: | ---: |
@@ -83,7 +84,8 @@ The weaker sizes (`"weaker"`) are at the edge of "clearly" (minimum 2.0-2.6x).
 The effects with memory, measured the same way (`python
 scripts/hidden_effect_excess.py --effects saturating_sorptive,fatigue_damage,
 lagged_swelling --seeds 10`, seeds 100-109, with `--sizes` for the weaker ones; the
-base fitted by `diagnose(tests, candidates=[], discover=False, max_rounds=1)`):
+base fitted by `diagnose(problem, CandidateSearch(candidates=[], discover=False,
+max_rounds=1))`):
 
 | effect | size | base / floor, median (min-max) | >= 2x | floor, um | true gain |
 | --- | ---: | ---: | ---: | ---: | ---: |
