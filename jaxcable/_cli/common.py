@@ -1,8 +1,10 @@
 """What every command of the command line shares: the error it reports, the progress
 switch and the output folders."""
 
+import contextlib
 import pathlib
 import sys
+from collections.abc import Iterator
 
 import jax
 
@@ -27,6 +29,16 @@ class CliError(Exception):
     def __init__(self, message: str, status: int = 2):
         super().__init__(message)
         self.status = status
+
+
+@contextlib.contextmanager
+def refused(prefix: str) -> Iterator[None]:
+    """Within it, a `ValueError` (the library refusing a value, naming it) is the
+    command line's error: `prefix: message`, exit status 2."""
+    try:
+        yield
+    except ValueError as e:
+        raise CliError(f"{prefix}: {e}") from None
 
 
 def one_line(message) -> str:

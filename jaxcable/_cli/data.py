@@ -21,7 +21,7 @@ from .._io import (
     read_test,
 )
 from .._progress import AbstractProgressMeter
-from .common import PROG, CliError, add_choice, one_line
+from .common import PROG, CliError, add_choice, one_line, refused
 from .limits import limits_note
 from .numbers import (
     breaking_strain as _breaking_strain,
@@ -381,10 +381,8 @@ def input_files(data: DataFiles, params: str | None) -> list[tuple[str, str]]:
 def test_drives(tests, drive: str):
     """Each test's drive with its reason (`--drive`, the file's `control` line, or
     detected from the data)."""
-    try:
+    with refused("--drive"):
         return resolve_drives(tests, drive)
-    except ValueError as e:
-        raise CliError(f"--drive: {e}") from None
 
 
 def read_described(data: DataFiles, meter: AbstractProgressMeter, log=None):

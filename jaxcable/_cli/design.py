@@ -18,7 +18,14 @@ from .._uncertainty import (
     design_discriminating_test,
     design_test,
 )
-from .common import CliError, least_squares, nuts, progress_meter, require_folder_of
+from .common import (
+    CliError,
+    least_squares,
+    nuts,
+    progress_meter,
+    refused,
+    require_folder_of,
+)
 from .data import DataFiles, data_options, read_described
 from .diagnose import run_diagnosis
 from .fit import (
@@ -165,25 +172,26 @@ class DesignRequest:
     **Fields:**
 
     - `model`, `data`: as for `jaxcable fit`.
+    - `out`: `--out`, the protocol file to write.
+    - `separate`: `--separate` as given, or None.
     - `fit`, `targets`: `--fit` and `--targets` as given (None: not given).
     - `method`: the least-squares method of the fit.
     - `posterior`: the sampler of `--posterior` and `--chains`, or None.
     - `lab`: the lab's limits.
-    - `separate`: `--separate` as given, or None.
     - `steps`: `--design-steps`.
-    - `out`, `quiet`: `--out`, `--quiet`.
+    - `quiet`: `--quiet`.
     """
 
     model: ModelChoice
     data: DataFiles
+    out: str
+    separate: str | None
     fit: str | None
     targets: str | None
     method: LeastSquares
     posterior: NUTS | None
     lab: Lab
-    separate: str | None
     steps: int
-    out: str
     quiet: bool = False
 
 
@@ -201,14 +209,14 @@ def design_command(args) -> int:
     request = DesignRequest(
         model=ModelChoice(args.model, args.params),
         data=DataFiles(tuple(args.data), data_options(args), args.every, args.drive),
+        out=args.out,
+        separate=args.separate,
         fit=args.fit,
         targets=args.targets,
         method=method,
         posterior=nuts(args) if args.posterior else None,
         lab=lab,
-        separate=args.separate,
         steps=args.design_steps,
-        out=args.out,
         quiet=args.quiet,
     )
     return design_next(request)
@@ -314,7 +322,7 @@ def _pair(text: str | None, targets) -> list[str] | None:
 def _design_and_write(known, tests, request: DesignRequest, lab: Lab, targets) -> int:
     """Design from `known` (a fit, a posterior or a diagnosis) within `lab`, print
     the summary and write `--out`; the exit status."""
-    try:
+    with refused("cannot design the test"):
         method = TestDesign(TestBudget(**dataclasses.asdict(lab)), steps=request.steps)
         cable = tests[0].cable()
         if isinstance(known, Diagnosis):
@@ -323,8 +331,6 @@ def _design_and_write(known, tests, request: DesignRequest, lab: Lab, targets) -
         else:
             designed = design_test(known, method, cable=cable, targets=targets)
             simulated = designed.sd_after
-    except ValueError as e:
-        raise CliError(f"cannot design the test: {e}") from None
     print(designed.summary())
     if not np.all(np.isfinite(simulated)):
         raise CliError("the designed test did not simulate.", status=1)

@@ -12,10 +12,10 @@ from .._problem import Problem
 from .._progress import AbstractProgressMeter
 from .._report import DIAGNOSIS_REPORT_FILES, write_diagnosis_report
 from .common import (
-    CliError,
     least_squares,
     make_folder,
     progress_meter,
+    refused,
     require_folder_of,
 )
 from .data import DataFiles, data_options, input_files, read_described
@@ -68,13 +68,9 @@ def run_diagnosis(
     The diagnosis.
     """
     # Every candidate's fits run as programs exported to the cache (see `run_fit`).
-    with exported_kernels():
-        try:
-            return diagnose(problem, search, progress_meter=meter)
-        except ValueError as e:
-            raise CliError(
-                f"{named_files(problem.tests)}: cannot diagnose with model '{name}': {e}"
-            ) from None
+    where = f"{named_files(problem.tests)}: cannot diagnose with model '{name}'"
+    with exported_kernels(), refused(where):
+        return diagnose(problem, search, progress_meter=meter)
 
 
 def diagnose_command(args) -> int:
@@ -96,12 +92,10 @@ def candidate_search(args) -> CandidateSearch:
     """The search of the parsed command line `args`: `--candidates`, the held-out
     data (`--split`, `--holdout`, `--folds`), the solver flags, `--max-rounds` and
     `--family`; a value the search refuses is an error naming its flags."""
-    try:
+    with refused("--holdout, --folds"):
         heldout = HeldOut(split=args.split, fraction=args.holdout, folds=args.folds)
-    except ValueError as e:
-        raise CliError(f"--holdout, --folds: {e}") from None
     candidates = tuple(args.candidates.split(",")) if args.candidates else None
-    try:
+    with refused("--candidates"):
         return CandidateSearch(
             candidates=candidates,
             heldout=heldout,
@@ -109,8 +103,6 @@ def candidate_search(args) -> CandidateSearch:
             max_rounds=args.max_rounds,
             family={"auto": None, "always": True, "never": False}[args.family],
         )
-    except ValueError as e:
-        raise CliError(f"--candidates: {e}") from None
 
 
 def diagnose_files(request: DiagnoseRequest) -> int:

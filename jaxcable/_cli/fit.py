@@ -32,6 +32,7 @@ from .common import (
     make_folder,
     nuts,
     progress_meter,
+    refused,
     require_folder_of,
 )
 from .data import DataFiles, data_options, input_files, read_described
@@ -113,12 +114,8 @@ def run_fit(
         exported_kernels(),
     ):
         warnings.simplefilter("ignore", IdentifiabilityWarning)
-        try:
+        with refused(f"{named_files(tests)}: cannot fit model '{name}'"):
             return fit(problem, method, throw=False)
-        except ValueError as e:
-            raise CliError(
-                f"{named_files(tests)}: cannot fit model '{name}': {e}"
-            ) from None
 
 
 def fit_failure(result: FitResult) -> CliError | None:
@@ -268,10 +265,8 @@ def run_posterior(
         f"sampling the posterior: {method.num_chains} chains x "
         f"{method.num_samples} draws (NUTS)"
     )
-    try:
+    with refused(f"--posterior: cannot sample model '{name}'"):
         return sample_posterior(problem, method, start=result)
-    except ValueError as e:
-        raise CliError(f"--posterior: cannot sample model '{name}': {e}") from None
 
 
 def write_params(path, result: FitResult, posterior: Posterior | None) -> None:
@@ -381,10 +376,8 @@ def each_files(
     fit failed or did not converge)."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", IdentifiabilityWarning)
-        try:
+        with refused(f"cannot fit model '{name}'"):
             results = fit_each(problems, request.method, progress_meter=meter)
-        except ValueError as e:
-            raise CliError(f"cannot fit model '{name}': {e}") from None
     header, rows = _summary_rows(request.data.paths, results)
     print()
     _print_summary(header, rows)
