@@ -10,6 +10,7 @@ takes a `Problem` first and a method second, as optimistix's
 import math
 import os
 from collections.abc import Mapping, Sequence
+from typing import Any
 
 import equinox as eqx
 import optimistix as optx
@@ -19,7 +20,7 @@ from ._io import TestData
 from ._models import AbstractCableModel
 
 
-def _as_tests(tests) -> tuple[TestData, ...]:
+def _as_tests(tests) -> Any:
     if isinstance(tests, TestData):
         return (tests,)
     if tests is None or isinstance(tests, (str, bytes, os.PathLike)):
@@ -30,13 +31,17 @@ def _as_tests(tests) -> tuple[TestData, ...]:
         return tests
 
 
-def _as_names(names) -> tuple[str, ...] | None:
+def _as_names(names) -> Any:
     if names is None or isinstance(names, str):
         return names  # a lone string is refused by __check_init__
     try:
         return tuple(names)
     except TypeError:
         return names
+
+
+def _as_per_test(names) -> Any:
+    return () if names is None else _as_names(names)
 
 
 def _as_transforms(transforms) -> tuple[tuple[str, str], ...]:
@@ -99,7 +104,7 @@ class Problem(eqx.Module):
         default=None, converter=_as_names, static=True
     )
     per_test: tuple[str, ...] = eqx.field(
-        default=(), converter=lambda n: () if n is None else _as_names(n), static=True
+        default=(), converter=_as_per_test, static=True
     )
     transforms: tuple[tuple[str, str], ...] = eqx.field(
         default=(), converter=_as_transforms, static=True

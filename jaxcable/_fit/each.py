@@ -9,9 +9,11 @@ is vmapped over them, so that one compiled program solves them all.
 import dataclasses
 import warnings
 from collections.abc import Sequence
+from typing import Literal
 
 import equinox as eqx
 import jax
+import jax.numpy as jnp
 import jax.random as jr
 import numpy as np
 import optimistix as optx
@@ -78,11 +80,11 @@ def _problem_list(problems) -> list[Problem]:
     return out
 
 
-def _checked_key(key) -> PRNGKeyArray:
+def _checked_key(key) -> PRNGKeyArray | np.ndarray:
     """`key`, or `jax.random.key(0)` for None."""
     if key is None:
         return jr.key(0)
-    typed = isinstance(key, jax.Array) and jax.dtypes.issubdtype(
+    typed = isinstance(key, jax.Array) and jnp.issubdtype(
         key.dtype, jax.dtypes.prng_key
     )
     raw = isinstance(key, (jax.Array, np.ndarray)) and (
@@ -109,7 +111,7 @@ def each_kernel(
     key: PRNGKeyArray,
     solver: optx.AbstractGaussNewton,
     max_steps: int,
-    jac: str,
+    jac: Literal["fwd", "bwd"],
     num_starts: int,
     spread: float,
 ) -> KernelOut:

@@ -11,6 +11,7 @@ Jacobian at the optimum.
 
 import math
 import warnings
+from typing import Literal
 
 import equinox as eqx
 import jax
@@ -115,7 +116,7 @@ def run_kernel(
     key: PRNGKeyArray | None,
     solver: optx.AbstractGaussNewton,
     max_steps: int,
-    jac: str,
+    jac: Literal["fwd", "bwd"],
     multistart: int,
     spread: float,
     test_list: list,

@@ -252,7 +252,9 @@ def _factor(model, loadings: list[_Loading]) -> float:
     return math.exp(float(np.mean(logs))) if logs else 1.0
 
 
-def start_scaling(model: AbstractCableModel, tests, *, drive="auto") -> StartScaling:
+def start_scaling(
+    model: AbstractCableModel, tests, *, drive: object = "auto"
+) -> StartScaling:
     """[`jaxcable.scaled_start`][], with the factors it applied.
 
     **Arguments:**
