@@ -25,7 +25,7 @@ from .._models import AbstractCableModel, ParameterInfo, parameter_info
 _BOUND_NUDGE = 1e-2
 
 
-def field_at(obj, path: str):
+def field_at(obj, path: str) -> Any:
     """`obj.a.b` for the path `"a.b"`."""
     for part in path.split("."):
         obj = getattr(obj, part)

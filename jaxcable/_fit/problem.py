@@ -353,7 +353,7 @@ def _checked_model(model, data: PaddedTests, tests) -> dict:
     for i in np.flatnonzero(~np.asarray(_check_model(model, data.cable))):
         raise StartError(
             f"`model`: its parameters are outside their domain for tests[{i}] "
-            f"({test_id(tests[i], i)}): {_DOMAIN_MESSAGE}",
+            f"({test_id(tests[i], int(i))}): {_DOMAIN_MESSAGE}",
             int(i),
             _DOMAIN_MESSAGE.rstrip("."),
         )

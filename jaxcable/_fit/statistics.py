@@ -94,8 +94,8 @@ def _identifiability(
                 )
     if s.size and s[0] > 0:
         for k in np.flatnonzero(s < _MIN_SINGULAR_RATIO * s[0]):
-            weights = np.abs(vt[k])
-            involved = [labels[i] for i in np.flatnonzero(weights > 0.3)]
+            weights = np.abs(vt[int(k)])
+            involved = [labels[int(i)] for i in np.flatnonzero(weights > 0.3)]
             out.append(
                 f"{', '.join(involved)}: near-zero singular value of the Jacobian "
                 f"({s[k] / s[0]:.2g} of the largest); the residuals do not change "
