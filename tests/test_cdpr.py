@@ -5,9 +5,8 @@ import numpy as np
 import pytest
 
 import jaxcable as jc
-from jaxcable import cdpr
-from jaxcable._drive import GRAVITY
-from jaxcable._models.extensions import TerminationCompliance
+from jaxcable import TerminationCompliance, cdpr
+from jaxcable.internal import GRAVITY
 
 
 ROBOT = cdpr.Robot()

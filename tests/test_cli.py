@@ -11,10 +11,8 @@ import numpy as np
 import pytest
 
 import jaxcable as jc
-from jaxcable._cli import demo as cli_demo
-from jaxcable._models import BY_CLI_NAME
-from jaxcable._papers import synthetic as _synthetic
 from jaxcable.cli import main
+from jaxcable.internal import BY_CLI_NAME, cli_demo, synthetic as _synthetic
 
 from .helpers import run_cli as _run
 
@@ -452,7 +450,7 @@ def test_fit_report(burgers_fit):
 
 def test_fit_report_models_match_the_fit(burgers_fit):
     # The report's model curves are the fitted model's: their RMSE is the fit's.
-    from jaxcable._report import model_elongations
+    from jaxcable.internal import model_elongations
 
     *_, files, params, _ = burgers_fit
     result = jc.FitResult.from_json(params)

@@ -45,7 +45,7 @@ HOT = jc.Cable(length=0.3, temperature=313.15)  # 20 K above T_ref: a_T != 1
 # beyond any real rope's breaking strain.
 UNBREAKABLE = jc.Cable(length=0.3, breaking_strain=math.inf)
 AREA = float(CABLE.area)
-# jaxcable._models.kernels: the tension clock counts time at F < F_on by F / F_on, F_on =
+# The model kernels: the tension clock counts time at F < F_on by F / F_on, F_on =
 # max(F_FLOOR, a tenth of the largest force so far); F_FLOOR was the old clock's switch.
 F_FLOOR = 1e-4 * float(CABLE.breaking_load)
 NOISE = (1e-6, 1e-3, 1.0)  # N
@@ -120,7 +120,7 @@ def _clock_change(time, force, d):
 
 
 def _clock(time, force):
-    """The clean time under tension, s (jaxcable._models.kernels.tension_time_step: the
+    """The clean time under tension, s (the kernels' `tension_time_step`: the
     exact integral of min(F / F_on, 1) over each step, F_on at the step's end)."""
     f_on = _f_on(force)[1:]
 

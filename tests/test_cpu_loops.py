@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import jaxcable as jc
-from jaxcable._cpu_loops import (
+from jaxcable.internal import (
     DEFAULT_LOOP_KERNEL_BYTES,
     NO_LOOP_KERNELS_ENV,
     loop_kernels_disabled,

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 import jaxcable as jc
-from jaxcable._cli.main import main
 from jaxcable._uncertainty.discriminate import _lack_of_fit
+from jaxcable.cli import main
 
 
 TRUTH = jc.BurgersModel(E1=2.0e9, eta0=3.0e11, E2=4.0e8, eta2=2.0e10)

@@ -11,9 +11,8 @@ import numpy as np
 import pytest
 
 import jaxcable as jc
-from jaxcable._diagnose import heldout_rmse, noise_level
-from jaxcable._papers import synthetic as _synthetic
 from jaxcable.cli import main
+from jaxcable.internal import heldout_rmse, noise_level, synthetic as _synthetic
 
 
 @pytest.fixture(scope="module")

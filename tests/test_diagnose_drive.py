@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 import jaxcable as jc
-from jaxcable._diagnose import heldout_rmse
 from jaxcable.cli import main
+from jaxcable.internal import heldout_rmse
 
 
 TRUTH = jc.BurgersModel(E1=2.0e9, eta0=3.0e11, E2=4.0e8, eta2=2.0e10)

@@ -122,7 +122,7 @@ def hidden():
 
 
 def _train(tests, holdout=0.3):
-    from jaxcable._diagnose import time_split
+    from jaxcable.internal import time_split
 
     return time_split(tests, holdout)[0]
 
@@ -229,7 +229,7 @@ def test_discover_finds_a_damage_that_runs_away():
     cycling Burgers cable (no covariate): the discovery finds that damage with an
     acceleration well above 0 (the run-away, not a damage linear in I), and it
     predicts the held-out samples."""
-    from jaxcable._diagnose import damage_integral, step_inputs
+    from jaxcable.internal import damage_integral, step_inputs
 
     def largest(tests):
         return max(

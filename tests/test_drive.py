@@ -111,7 +111,7 @@ def test_metadata_names_the_control():
         ("position", "elongation"),
     ]:
         assert jc.ControlDetection is not None
-        from jaxcable._io.control import control_name
+        from jaxcable.internal import control_name
 
         assert control_name(text, "x") == control
 
@@ -314,7 +314,7 @@ def test_report_of_a_displacement_controlled_fit(
 ):
     """The report plots the model's force at the measured elongation and tabulates
     the force RMSE, for each elongation-driven test."""
-    from jaxcable._report import write_report
+    from jaxcable.internal import write_report
 
     tests = [t for t, _ in displacement_tests]
     written = write_report(tmp_path, displacement_fit, tests)

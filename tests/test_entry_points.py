@@ -11,9 +11,8 @@ import numpy as np
 import pytest
 
 import jaxcable as jc
-from jaxcable._diagnose import heldout_rmse
-from jaxcable._report import model_elongations
 from jaxcable.cli import main
+from jaxcable.internal import heldout_rmse, model_elongations
 
 
 # Issue 10's history: 0 -> 100 N in 300 s, hold 2 h, unload to 2 N in 300 s, rest 2 h,

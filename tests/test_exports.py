@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 import jaxcable as jc
-from jaxcable._io import resolve_control
 from jaxcable.cli import main
+from jaxcable.internal import resolve_control
 
 
 EXPORTS = pathlib.Path(__file__).parent / "data" / "exports"

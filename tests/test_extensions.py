@@ -27,7 +27,7 @@ from jaxcable import (
     log_shift_arrhenius,
     log_shift_wlf,
 )
-from jaxcable._models import parameter_info
+from jaxcable.internal import parameter_info
 
 from .helpers import PARK_CABLE as CABLE, PARK_MODEL as BASE
 
@@ -239,7 +239,7 @@ def test_hereditary_ramp_matches_exact_superposition():
     # e = exp(-t / t_c), and Park's equivalent-force reading of it is
     # (I / t)(1 - e) / (E2c A); the extension adds w times their difference. F0 = 1 N
     # is above the 0.2 N where the tension clock ramps in
-    # (`jaxcable._models.kernels.tension_time_step`), so the clock is the real time.
+    # (the kernels' `tension_time_step`), so the clock is the real time.
     k, f0 = 0.5, 1.0  # N/s, N
     time = jnp.linspace(0.0, 200.0, TIME.shape[0])
     force = f0 + k * time

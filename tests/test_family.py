@@ -10,8 +10,7 @@ import numpy as np
 import pytest
 
 import jaxcable as jc
-from jaxcable._diagnose import FAMILY_EXCESS
-from jaxcable._papers import synthetic as _synthetic
+from jaxcable.internal import FAMILY_EXCESS, synthetic as _synthetic
 
 
 # A constant load on the default 3 mm cable: 14 MPa.

@@ -470,7 +470,7 @@ def test_early_stop_keeps_the_minimum():
     """The default solver stops before evaluating a proposal that would pass the
     convergence test: one evaluation fewer than optimistix's own step, and the same
     minimum within the tolerance."""
-    from jaxcable._fit.solver import LevenbergMarquardt
+    from jaxcable.internal import LevenbergMarquardt
 
     class Plain(LevenbergMarquardt):
         def step(self, fn, y, args, options, state, tags):
@@ -496,7 +496,7 @@ def test_with_jacobian_jvp_differentiates_like_the_plain_function():
     # The rule behind the fit's and the calibration's Levenberg-Marquardt: the JVP is
     # a product with the Jacobian computed with the residuals; aux rides along with a
     # zero tangent; the residuals and the Jacobian are divided by `scale`.
-    from jaxcable._fit import with_jacobian_jvp
+    from jaxcable.internal import with_jacobian_jvp
 
     def residuals(u):
         r = jnp.stack([jnp.sin(u[0]) * u[1], u[0] ** 3, jnp.exp(u[1])])

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import jaxcable
-from jaxcable._models.kernels import kelvin_voigt_step
+from jaxcable.internal import kelvin_voigt_step
 
 from .helpers import asymmetric_five_element, floats
 

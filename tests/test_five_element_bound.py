@@ -15,7 +15,7 @@ from hypothesis import given, settings, strategies as st
 
 import jaxcable
 from jaxcable import StrainParts
-from jaxcable._models import piao
+from jaxcable.internal import piao
 
 
 N = 40

@@ -9,7 +9,7 @@ import pytest
 
 import jaxcable as jc
 from jaxcable import papers
-from jaxcable._papers import hidden_effects, synthetic
+from jaxcable.internal import hidden_effects, synthetic
 
 
 EFFECTS = list(papers.OUT_OF_CATALOGUE)

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import jaxcable as jc
-from jaxcable._cli.data import Reading, read_tests
+from jaxcable.internal import cli_data
 
 
 # time s, elongation mm, force N: the rows every layout below writes, in its units.
@@ -238,12 +238,12 @@ def test_caller_values_win_with_a_warning(tmp_path):
 
 def test_cli_prints_the_warning_as_one_line(tmp_path, capsys):
     path = _write(tmp_path, "bluehill.csv", _bluehill(), newline="\r\n")
-    options = Reading(
+    options = cli_data.Reading(
         metadata={"length_mm": 20.0}, options=jc.ReadOptions(detect_slack=False)
     )
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # printed, not raised
-        (data,) = read_tests([path], options, 1, jc.NoProgressMeter())
+        (data,) = cli_data.read_tests([path], options, 1, jc.NoProgressMeter())
     assert data.metadata["length_mm"] == 20.0
     err = capsys.readouterr().err
     assert err.count("\n") == 1

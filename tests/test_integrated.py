@@ -133,7 +133,7 @@ def test_second_tensile_test_stretches_back():
     # rested cable must stretch back on reloading, more after a longer rest where
     # the recovery is not complete (300 mm) and the same where it is (100 mm).
     from jaxcable import papers
-    from jaxcable._papers.park import second_test_indices
+    from jaxcable.internal import second_test_indices
 
     n = 40
     rest_end, peak2 = second_test_indices(n)

@@ -12,7 +12,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
 import jaxcable as jc
-import jaxcable._io.csv as csv_module
+from jaxcable.internal import io_csv as csv_module
 
 
 def _error(path, line, column=None, **kwargs) -> str:

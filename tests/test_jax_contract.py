@@ -66,7 +66,7 @@ def test_default_and_fitted_values_share_one_program():
     jc.simulate_rate_test(model, CABLE, PROTOCOL)
     cable = jc.Cable(length=jnp.asarray(np.asarray(0.1)), speed=CABLE.speed)
     jc.simulate_rate_test(fitted, cable, PROTOCOL)
-    from jaxcable._models.registry import CLASSES_BY_NAME
+    from jaxcable.internal import CLASSES_BY_NAME
 
     for cls in CLASSES_BY_NAME.values():
         try:

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 import jaxcable as jc
-from jaxcable._diagnose import channel_noise, grid_step, white_part
-from jaxcable._papers.synthetic import hidden_effect_model
+from jaxcable.internal import channel_noise, grid_step, white_part
+from jaxcable.papers import hidden_effect_model
 
 from .helpers import creep_recovery_protocol
 

@@ -14,7 +14,7 @@ import pytest
 
 import jaxcable as jc
 from jaxcable import papers
-from jaxcable._papers import calibration, park
+from jaxcable.internal import calibration, park
 
 
 # Errors (%) of the default set, as measured when it was fitted (samples_per_ramp=200).
@@ -74,7 +74,7 @@ def test_cyclic_behaviour():
 
 
 def test_default_set_is_physical():
-    # The constraints of the fit (jaxcable._papers.calibration): no hardening (not
+    # The constraints of the fit (`jaxcable.internal.calibration`): no hardening (not
     # identified; beta > 0 would break the monotonicity in load); the unloading line
     # at least as stiff as the loading curve; the short-term element creeps faster
     # than it recovers; the flow fixed at its literature anchor.
@@ -113,7 +113,7 @@ def test_park_protocol_simulates(length, rate_mm_per_min, force):
     # Park's protocol (10 cycles, a rest, the re-stretch) at his lengths, rates and
     # forces: the re-stretch passes through the strain at which h = 1 + beta
     # eps**gamma starts, and must still have a loading time for every force sample.
-    from jaxcable._papers import park_protocol
+    from jaxcable.papers import park_protocol
 
     cable = jc.Cable(length=length, speed=rate_mm_per_min * 1e-3 / 60)
     for rest_hours in (24.0, 48.0, 72.0):

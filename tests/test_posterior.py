@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import jaxcable as jc
-from jaxcable._uncertainty import bulk_ess, split_rhat
+from jaxcable.internal import bulk_ess, split_rhat
 
 
 TRUTH = jc.BurgersModel(E1=2.0e9, eta0=3.0e11, E2=4.0e8, eta2=2.0e10)
@@ -142,7 +142,7 @@ def test_errors_name_the_argument():
 
 
 def test_fit_command_posterior(tmp_path, posterior):
-    from jaxcable._cli.main import main
+    from jaxcable.cli import main
 
     paths = []
     for force, seed in ((20.0, 0), (40.0, 1)):

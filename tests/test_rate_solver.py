@@ -74,9 +74,10 @@ def _tanh_root(tol, guess, c, active=None):
     away; c < 0 puts the root below `lower` (no root)."""
     import jax.numpy as jnp
 
-    from jaxcable._drive.newton import Newton, root_scalar
+    from jaxcable import Newton
+    from jaxcable.internal import newton
 
-    return root_scalar(
+    return newton.root_scalar(
         lambda y, c: jnp.tanh(4.0 * (y - c)),
         Newton(tol=tol, max_steps=3),
         guess,

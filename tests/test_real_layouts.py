@@ -16,8 +16,7 @@ import numpy as np
 import pytest
 
 import jaxcable as jc
-from jaxcable._cli.data import data_options, read_data
-from jaxcable._cli.parser import build_parser
+from jaxcable.internal import cli_data, cli_parser
 
 
 DATA = pathlib.Path(__file__).parent / "data"
@@ -254,12 +253,14 @@ def test_command_line_options_reach_the_reader():
     """`--force-sign +1` and `--no-tare` read the latex glove as written; the
     defaults correct it, and the notes say so."""
     path = str(WAVEMATRIX / "latex_glove_Test6.steps.tracking.csv")
-    parser = build_parser()
+    parser = cli_parser.build_parser()
     common = ["fit", path, "--length-mm", "79", "--out", "p.json"]
-    default = read_data(path, data_options(parser.parse_args(common)))
-    written = read_data(
+    default = cli_data.read_data(path, cli_data.data_options(parser.parse_args(common)))
+    written = cli_data.read_data(
         path,
-        data_options(parser.parse_args([*common, "--force-sign", "+1", "--no-tare"])),
+        cli_data.data_options(
+            parser.parse_args([*common, "--force-sign", "+1", "--no-tare"])
+        ),
     )
     assert any("tared" in n for n in default.notes)
     assert not any("tared" in n or "flipped" in n for n in written.notes)
@@ -278,7 +279,7 @@ def test_command_line_options_reach_the_reader():
             "p.json",
         ]
     )
-    assert read_data(str(LIU), data_options(args)).num_samples == 62
+    assert cli_data.read_data(str(LIU), cli_data.data_options(args)).num_samples == 62
 
 
 PYRHEO = REAL / "pyRheo"
@@ -303,8 +304,10 @@ def test_rheocompass_export_reads_with_its_record_options():
         if r["id"] == "cnf_hydrogel_step_strain_relaxation"
     ]
     path = str(REAL / record["files"][0])
-    args = build_parser().parse_args(["fit", path, *record["options"], "--out", "p"])
-    data = read_data(path, data_options(args))
+    args = cli_parser.build_parser().parse_args(
+        ["fit", path, *record["options"], "--out", "p"]
+    )
+    data = cli_data.read_data(path, cli_data.data_options(args))
     text = pathlib.Path(path).read_bytes().decode("utf-16")
     rows = [line.split("\t") for line in text.splitlines()]
     rows = [r for r in rows if r[0].strip().isdigit()]

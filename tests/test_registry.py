@@ -14,22 +14,21 @@ import numpy as np
 import pytest
 
 import jaxcable as jc
-from jaxcable._fit.serialize import model_document
-from jaxcable._models import (
+from jaxcable import COVARIATE_EXTENSIONS, EXTENSIONS, AbstractExtension
+from jaxcable.cli import main
+from jaxcable.internal import (
     BY_CLI_NAME,
     CLASSES_BY_NAME,
-    COVARIATE_EXTENSIONS,
     DEFAULT_CLI_MODEL,
-    EXTENSIONS,
     PARK_IDENTIFIABLE,
-    AbstractExtension,
     cli_name,
+    field_facts,
+    fit_parameters,
     identifiable,
+    model_document,
     parameter_info,
     parameter_table,
 )
-from jaxcable._models.fields import field_facts, fit_parameters
-from jaxcable.cli import main
 
 
 # A few dozen samples of one load-unload history on a 7 m cable (inside the range of
@@ -228,11 +227,12 @@ def test_candidate_facts():
 
 
 def test_fit_names_of_a_wrapped_model():
-    from jaxcable._cli.common import CliError
-    from jaxcable._cli.models import names_option
+    from jaxcable.internal import cli_common, cli_models
 
     model = NESTED.base  # BeddingIn(IntegratedModel)
-    names = names_option("s_b,base.E1c", "--fit", model, "bedding-in(integrated)")
+    names = cli_models.names_option(
+        "s_b,base.E1c", "--fit", model, "bedding-in(integrated)"
+    )
     assert names == ["s_b", "base.E1c"]
-    with pytest.raises(CliError, match="'E1c' is not a parameter"):
-        names_option("E1c", "--fit", model, "bedding-in(integrated)")
+    with pytest.raises(cli_common.CliError, match="'E1c' is not a parameter"):
+        cli_models.names_option("E1c", "--fit", model, "bedding-in(integrated)")

@@ -1,5 +1,5 @@
 """One compiled fit kernel for every candidate of a diagnosis (issue 14): a fit of a
-subset of a model's parameters (`jaxcable._fit.fit_subset`) equals `jaxcable.fit` of
+subset of a model's parameters (`jaxcable.internal.fit_subset`) equals `jaxcable.fit` of
 the same parameters, the extension stack reproduces each candidate alone, and a
 diagnosis traces the fit kernel at most once."""
 
@@ -7,9 +7,13 @@ import numpy as np
 import pytest
 
 import jaxcable as jc
-from jaxcable._diagnose import stack_of
-from jaxcable._fit import fit_subset, shared_layout, solver as _solver
-from jaxcable._papers import synthetic as _synthetic
+from jaxcable.internal import (
+    fit_solver as _solver,
+    fit_subset,
+    shared_layout,
+    stack_of,
+    synthetic as _synthetic,
+)
 
 
 BURGERS = jc.BurgersModel(E1=2.0e9, eta0=2.0e12, E2=5.0e8, eta2=5.0e9)

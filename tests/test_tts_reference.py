@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 import jaxcable as jc
-from jaxcable._diagnose import heldout_rmse
-from jaxcable._papers.synthetic import hidden_effect_model, synthesize
+from jaxcable.internal import heldout_rmse
+from jaxcable.papers import hidden_effect_model, synthesize
 
 from .helpers import creep_recovery_protocol
 

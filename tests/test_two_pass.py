@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import jaxcable as jc
-from jaxcable._drive import drives, newton, scan
+from jaxcable.internal import drives, newton, scan
 
 from .helpers import finite_difference_grad
 

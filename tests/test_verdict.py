@@ -9,18 +9,16 @@ import numpy as np
 import pytest
 
 import jaxcable as jc
-from jaxcable._diagnose import (
+from jaxcable import Candidate, Diagnosis, residual_structure
+from jaxcable.internal import (
     MAX_FLOOR_RATIO,
     MIN_AUTOCORRELATION,
     MIN_EXCESS,
     MIN_EXPLAINED_PCT,
-    Candidate,
-    Diagnosis,
     decide,
     explained_pct,
     explained_rmse_pct,
     rate_of_change,
-    residual_structure,
 )
 
 
