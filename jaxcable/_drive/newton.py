@@ -134,7 +134,7 @@ class RootResult(eqx.Module):
 
 
 def root_scalar(
-    fn: Callable[[Float[Array, ""], Any], Float[Array, ""]],
+    fn: Callable[[Float[Array, ""], Any], Any],
     solver: Newton | optx.AbstractRootFinder,
     guess: Float[Array, ""],
     args: Any,

@@ -2,6 +2,7 @@
 the chunks and the devices), validated at construction."""
 
 from collections.abc import Sequence
+from typing import Any
 
 import equinox as eqx
 import jax
@@ -19,7 +20,9 @@ def _levels(percentiles: Sequence[float]) -> tuple[float, ...]:
     return tuple(float(q) for q in check_percentiles(percentiles))
 
 
-def _device_tuple(devices: Sequence[jax.Device] | None):
+# `jax.Device` is an alias that type checkers do not take for a type: `Any` stands for
+# it in the annotations.
+def _device_tuple(devices: Sequence[Any] | None):
     return None if devices is None else tuple(devices)
 
 
@@ -60,7 +63,7 @@ class MonteCarlo(eqx.Module):
     method: str = eqx.field(default="auto", static=True)
     bins: int = eqx.field(default=1024, static=True)
     keep_draws: bool = eqx.field(default=False, static=True)
-    devices: tuple[jax.Device, ...] | None = eqx.field(
+    devices: tuple[Any, ...] | None = eqx.field(
         default=None, static=True, converter=_device_tuple
     )
 

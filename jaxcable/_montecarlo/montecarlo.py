@@ -347,7 +347,7 @@ def _run_chunks(plan: _Plan, meter, run, stats, lo_dev, width_dev):
     with meter.bar("monte_carlo", plan.num_chunks, eta=True, keep=True) as bar:
         for c in range(plan.num_chunks):
             out = run(c, stats, lo_dev, width_dev)
-            if plan.exact:
+            if kept is not None and kept_valid is not None:  # exact percentiles
                 stats, elongation, valid = out
                 kept[c * chunk : (c + 1) * chunk] = to_host(elongation)
                 kept_valid[c * chunk : (c + 1) * chunk] = to_host(valid)
