@@ -185,6 +185,16 @@ def test_bad_unrolled(bad):
         jc.Newton(tol=1e-12, unrolled=bad)
 
 
+def test_bad_simulation_fields():
+    with pytest.raises(ValueError, match="solver"):
+        jc.Simulation(solver="newton")
+    with pytest.raises(TypeError, match="throw"):
+        jc.Simulation(throw="no")
+    # A solver where the simulation's method belongs.
+    with pytest.raises(TypeError, match="method"):
+        jc.simulate_rate_test(MODEL, CABLE, PROTOCOL, method=jc.Newton(tol=1e-12))
+
+
 def test_bad_two_pass():
     with pytest.raises(ValueError, match="two_pass"):
         jc.Newton(tol=1e-12, two_pass="yes")
