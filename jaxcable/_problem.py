@@ -7,7 +7,6 @@ takes a `Problem` first and a method second, as optimistix's
 `least_squares(fn, solver, y0)` takes its solver: each fact is given once.
 """
 
-import math
 import os
 from collections.abc import Mapping, Sequence
 from typing import Any
@@ -16,6 +15,7 @@ import equinox as eqx
 import optimistix as optx
 from jaxtyping import PRNGKeyArray
 
+from ._checks import require_int, require_number
 from ._io import TestData
 from ._models import AbstractCableModel
 
@@ -210,22 +210,13 @@ class LeastSquares(eqx.Module):
     key: PRNGKeyArray | None = None
 
     def __check_init__(self):
-        for name in ("multistart", "max_steps"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                raise ValueError(f"`{name}` must be an int >= 1, got {value!r}.")
-        spread = self.spread
-        if not (
-            isinstance(spread, (int, float))
-            and not isinstance(spread, bool)
-            and spread >= 0
-            and math.isfinite(spread)
-        ):
-            raise ValueError(f"`spread` must be a finite number >= 0, got {spread!r}.")
+        require_int("multistart", self.multistart, low=1)
+        require_int("max_steps", self.max_steps, low=1)
+        require_number("spread", self.spread, low=0)
         if self.solver is not None and not isinstance(
             self.solver, optx.AbstractGaussNewton
         ):
-            raise ValueError(
+            raise TypeError(
                 "`solver` must be an optimistix Gauss-Newton-type least-squares "
                 f"solver (optx.LevenbergMarquardt, ...), got {self.solver!r}."
             )

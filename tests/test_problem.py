@@ -58,20 +58,20 @@ def test_a_bad_problem_names_its_field(fields, error, match):
 
 
 @pytest.mark.parametrize(
-    "fields, match",
+    "fields, error, match",
     [
-        (dict(multistart=0), "`multistart`"),
-        (dict(multistart=1.5), "`multistart`"),
-        (dict(multistart=True), "`multistart`"),
-        (dict(max_steps=0), "`max_steps`"),
-        (dict(spread=-1.0), "`spread`"),
-        (dict(spread=math.nan), "`spread`"),
-        (dict(spread="wide"), "`spread`"),
-        (dict(solver="lm"), "`solver`"),
+        (dict(multistart=0), ValueError, "`multistart`"),
+        (dict(multistart=1.5), TypeError, "`multistart`"),
+        (dict(multistart=True), TypeError, "`multistart`"),
+        (dict(max_steps=0), ValueError, "`max_steps`"),
+        (dict(spread=-1.0), ValueError, "`spread`"),
+        (dict(spread=math.nan), ValueError, "`spread`"),
+        (dict(spread="wide"), TypeError, "`spread`"),
+        (dict(solver="lm"), TypeError, "`solver`"),
     ],
 )
-def test_a_bad_method_names_its_field(fields, match):
-    with pytest.raises(ValueError, match=match):
+def test_a_bad_method_names_its_field(fields, error, match):
+    with pytest.raises(error, match=match):
         jc.LeastSquares(**fields)
 
 
