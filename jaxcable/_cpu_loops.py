@@ -19,6 +19,8 @@ jaxcable computes nothing).
 
 import os
 
+from ._checks import require_int
+
 
 # The flag, as XLA's CPU backend reads it from `--xla_backend_extra_options`.
 _OPTION = "xla_cpu_small_while_loop_byte_threshold"
@@ -86,13 +88,10 @@ def enable_cpu_loop_kernels(byte_threshold: int = DEFAULT_LOOP_KERNEL_BYTES) -> 
     **Raises:**
 
     `RuntimeError` when JAX's backend has already started (the flag would do
-    nothing), and `ValueError` for a threshold that is not a positive integer.
+    nothing); `TypeError` for a threshold that is not an integer and `ValueError`
+    for one below 1 (bytes).
     """
-    is_int = isinstance(byte_threshold, int) and not isinstance(byte_threshold, bool)
-    if not is_int or byte_threshold <= 0:
-        raise ValueError(
-            f"`byte_threshold` must be a positive integer (bytes), got {byte_threshold!r}."
-        )
+    require_int("byte_threshold", byte_threshold, low=1)
     if _backend_started():
         raise RuntimeError(
             "enable_cpu_loop_kernels: JAX's backend has already started, so XLA_FLAGS "

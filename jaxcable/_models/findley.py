@@ -162,16 +162,7 @@ class FindleyModel(AbstractCableModel[FindleyState]):
                 "`FindleyModel.t_short` must be below `t_long`, got "
                 f"t_short={self.t_short}, t_long={self.t_long}."
             )
-        if isinstance(self.elements, bool) or not isinstance(self.elements, int):
-            raise ValueError(
-                f"`FindleyModel.elements` must be a positive int, got "
-                f"{self.elements!r}."
-            )
-        if self.elements < 1:
-            raise ValueError(
-                f"`FindleyModel.elements` must be a positive int, got "
-                f"{self.elements!r}."
-            )
+        _checks.require_int("FindleyModel.elements", self.elements, low=1)
 
     def check(self, cable: Cable) -> RESULTS:
         ok = _checks.all_ok(declared_ok(self), self.n < 1)
