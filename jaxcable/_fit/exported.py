@@ -27,6 +27,7 @@ import os
 import pathlib
 import re
 import tempfile
+from typing import Any
 
 import equinox as eqx
 import jax
@@ -94,7 +95,8 @@ def _fingerprint(static, treedef, leaves) -> str:
             _source_digest(),
             f"jax {jax.__version__}",
             f"backend {jax.default_backend()} {jax.devices()[0].device_kind}",
-            f"x64 {jax.config.jax_enable_x64}",
+            # jax's Config sets its options as attributes at run time.
+            f"x64 {jax.config.jax_enable_x64}",  # pyright: ignore[reportAttributeAccessIssue]
             _ADDRESS.sub("", str(treedef)),
             _ADDRESS.sub("", repr(jax.tree.leaves(static))),
             repr([(x.shape, str(x.dtype), _weak(x)) for x in leaves]),
@@ -152,7 +154,8 @@ def _out_structure(problem):
     before a program is written, so that a changed `KernelOut` turns the cache off
     instead of mis-assembling the output.
     """
-    fields = {f.name: 0 for f in dataclasses.fields(KernelOut)}
+    # Placeholder leaves: only the structure is read.
+    fields: dict[str, Any] = {f.name: 0 for f in dataclasses.fields(KernelOut)}
     results = optx.RESULTS.successful
     fields.update(results=results, best_result=results, params=problem.base)
     return jax.tree.structure(KernelOut(**fields))
