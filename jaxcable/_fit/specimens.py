@@ -75,11 +75,13 @@ def _stacked(datas: list[PaddedTests]) -> PaddedTests:
         name: np.stack([_padded(getattr(d, name), length, fill) for d in host])
         for name, fill in _FILL.items()
     }
+    # NumPy leaves where PaddedTests declares jax arrays: they stay on the host until
+    # the kernel's call transfers them.
     return PaddedTests(
-        **fields,
+        **fields,  # pyright: ignore[reportArgumentType]
         cable=jax.tree.map(lambda *xs: np.stack(xs), *(d.cable for d in host)),
         drive=host[0].drive,
-        scale=np.stack([d.scale for d in host]),
+        scale=np.stack([d.scale for d in host]),  # pyright: ignore[reportArgumentType]
     )
 
 
