@@ -42,7 +42,7 @@ def _info(owner: AbstractCableModel, field: str, prefix: str) -> ParameterInfo |
     """How `field` of `owner` is fitted, with a `tanh` bound named by its full path."""
     info = parameter_info(type(owner), field)
     other = None if info is None else bound_of(info.transform)
-    if other is not None:
+    if info is not None and other is not None:
         # The bound is a sibling parameter: name it by its full path.
         info = dataclasses.replace(info, transform="tanh:" + prefix + other)
     return info

@@ -241,6 +241,7 @@ class ResidualProblem(eqx.Module):
         """u from the solver's vector v (v itself unless a subset is solved)."""
         if self.select is None:
             return v
+        assert self.fixed is not None  # set together with `select`
         slots = jnp.concatenate([self.fixed, jnp.zeros((1,), self.fixed.dtype)])
         return slots.at[self.select].set(v)[:-1]
 

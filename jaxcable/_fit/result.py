@@ -307,7 +307,7 @@ class FitResult:
         where = "<json text>" if is_text else str(source)
         try:
             if is_text:
-                doc = parse_json(source, where)
+                doc = parse_json(str(source), where)
             else:
                 doc = read_json(source, "a PARAMS.json")
         except ValueError as e:

@@ -22,7 +22,7 @@ PARTS: dict[str, type] = {ParameterSurface.__name__: ParameterSurface}
 """The modules other than models that a model may hold as a field, by class name."""
 
 
-def model_document(model: AbstractCableModel) -> dict[str, Any]:
+def model_document(model: eqx.Module) -> dict[str, Any]:
     """The JSON document of `model`.
 
     **Arguments:**

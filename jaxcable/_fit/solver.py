@@ -42,10 +42,11 @@ class LevenbergMarquardt(optx.AbstractGaussNewton):
     atol: float
     ftol: float = 0.0
     norm: Callable = optx.max_norm
-    descent: optx.DampedNewtonDescent = optx.DampedNewtonDescent(
+    # optimistix's own solvers override its AbstractVars so; pyright wants the same type.
+    descent: optx.DampedNewtonDescent = optx.DampedNewtonDescent(  # pyright: ignore[reportIncompatibleVariableOverride]
         linear_solver=lx.Normal(lx.Cholesky())
     )
-    search: optx.ClassicalTrustRegion = optx.ClassicalTrustRegion(
+    search: optx.ClassicalTrustRegion = optx.ClassicalTrustRegion(  # pyright: ignore[reportIncompatibleVariableOverride]
         high_cutoff=0.75, low_cutoff=0.25, high_constant=5.0, low_constant=0.25
     )
     verbose: Callable = lambda **kwargs: None

@@ -17,6 +17,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
+from .._cable import Cable
 from .._drive import Simulation, simulate_force_history
 from .._models import (
     AbstractCableModel,
@@ -134,7 +135,9 @@ def retardation_times(model: AbstractCableModel) -> list[float]:
         elif isinstance(layer, BurgersModel):
             out.append(layer.eta2 / layer.E2)
         elif isinstance(layer, AbstractFiveElement):
-            out += [layer.eta_L2 / layer.E_L2, layer.eta_L3 / layer.E_L3]
+            # Both five-element models declare Table 1's fields, in orders of their
+            # own, so that the abstract class cannot declare them.
+            out += [layer.eta_L2 / layer.E_L2, layer.eta_L3 / layer.E_L3]  # pyright: ignore[reportAttributeAccessIssue]
         else:
             facts = field_facts(type(layer))
             out += [
@@ -176,7 +179,7 @@ class _Loading:
     force: np.ndarray
     strain: np.ndarray
     mask: np.ndarray
-    cable: object
+    cable: Cable
 
 
 def _loading(test) -> _Loading | None:
