@@ -211,3 +211,20 @@ def test_closed_form_3x3_solve_matches_lapack():
     # A general (non-symmetric) matrix too.
     m = rng.standard_normal((3, 3)) + 3 * np.eye(3)
     np.testing.assert_allclose(_solve3(m, b), np.linalg.solve(m, b), rtol=1e-10)
+
+
+@pytest.mark.parametrize(
+    "fields, error",
+    [
+        (dict(steps=-1), ValueError),
+        (dict(steps=1.5), TypeError),
+        (dict(ridge=-0.1), ValueError),
+        (dict(ridge="big"), TypeError),
+    ],
+)
+def test_gain_tuning_names_a_bad_field(fields, error):
+    (name,) = fields
+    with pytest.raises(error, match=f"`{name}`"):
+        cdpr.GainTuning(**fields)
+    with pytest.raises(TypeError, match="`method`"):
+        cdpr.tune_gain(ROBOT, None, REAL, cdpr.NOMINAL, 1.0, method={"steps": 1})

@@ -40,6 +40,7 @@ from .scenario import (
     real_cables as real_cables,
 )
 from .tuning import (
+    GainTuning as GainTuning,
     errors_and_jacobian as errors_and_jacobian,
     loss_and_grad as loss_and_grad,
     position_loss as position_loss,

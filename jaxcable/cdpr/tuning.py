@@ -10,6 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
+from .._checks import require_int, require_number
 from .._models import AbstractCableModel
 from .robot import Robot
 from .run import simulate_robot
@@ -76,15 +77,31 @@ def errors_and_jacobian(
     return _residuals_and_jacobian(g, robot, scenario, real, controller)
 
 
+class GainTuning(eqx.Module):
+    """How [`jaxcable.cdpr.tune_gain`][] tunes: Gauss-Newton steps with a ridge.
+
+    **Fields:**
+
+    - `steps`: Gauss-Newton steps (default 2), >= 0.
+    - `ridge`: the weight of the pull towards a gain of 1, relative to the mean
+        curvature (default 0.03), >= 0.
+    """
+
+    steps: int = eqx.field(default=2, static=True)
+    ridge: float = eqx.field(default=0.03, static=True)
+
+    def __check_init__(self):
+        require_int("steps", self.steps, low=0)
+        require_number("ridge", self.ridge, low=0)
+
+
 def tune_gain(
     robot: Robot,
     scenario: Scenario,
     real: AbstractCableModel,
     controller: AbstractCableModel,
     gain: Float[ArrayLike, "*n"] = 1.0,
-    *,
-    steps: int = 2,
-    ridge: float = 0.03,
+    method: "GainTuning | None" = None,
 ) -> tuple[Float[Array, "*n"], list[dict]]:
     """Tune the compensation gain (one for all cables, or one per cable) by the
     derivative of the position error through the closed loop.
@@ -102,14 +119,20 @@ def tune_gain(
     - `robot`, `scenario`, `real`, `controller`: as in
         [`jaxcable.cdpr.simulate_robot`][] (the scenario is the training run).
     - `gain`: the starting gain, a scalar or shape `(n,)` (one per cable).
-    - `steps`: Gauss-Newton steps.
-    - `ridge`: the weight of the pull towards 1, relative to the mean curvature.
+    - `method`: a [`jaxcable.cdpr.GainTuning`][] (default `GainTuning()`: 2 steps,
+        ridge 0.03).
 
     **Returns:**
 
     `(gain, history)`: the tuned gain (the shape of `gain`) and, per step, a dict with
     the `gain` (NumPy) and the run's `rms_mm` at it.
     """
+    method = GainTuning() if method is None else method
+    if not isinstance(method, GainTuning):
+        raise TypeError(
+            f"`method` must be a jaxcable.cdpr.GainTuning, got {type(method).__name__}."
+        )
+    steps, ridge = method.steps, method.ridge
     dtype = jnp.result_type(float, scenario.position)
     g = jnp.asarray(gain, dtype)
     shape = g.shape
