@@ -9,6 +9,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
+from numpy.typing import DTypeLike
 
 from .. import _checks
 from .._cable import ZERO_CELSIUS, Cable
@@ -273,7 +274,8 @@ def resolve_drives(tests, drive=None) -> list[ControlDetection]:
 
 def _scales(rows: list[_Row]) -> np.ndarray:
     """Each test's residual unit (see `PaddedTests.scale`)."""
-    if len({r.drive for r in rows}) == 1:
+    # equinox Modules hash (frozen); pyright takes them for unhashable.
+    if len({r.drive for r in rows}) == 1:  # pyright: ignore[reportUnhashable]
         return np.ones(len(rows))
     out = []
     for r in rows:
@@ -346,7 +348,7 @@ def pad_tests(
 
     dtype = jnp.result_type(float)
 
-    def put(x, dtype=dtype):
+    def put(x, dtype: DTypeLike = dtype):
         # Converted by NumPy, then transferred: `jnp.asarray` of a NumPy array runs
         # a small compiled program per shape and dtype, `device_put` only copies.
         return jax.device_put(np.asarray(x, dtype))

@@ -46,7 +46,7 @@ def _read_result(doc: Mapping[str, Any]) -> RESULTS:
     return by_message[message]
 
 
-def _json_matrix(matrix: np.ndarray) -> list[list[float | None]]:
+def _json_matrix(matrix: np.ndarray) -> list[list]:
     return [[jsonable(float(c)) for c in row] for row in matrix]
 
 
@@ -154,7 +154,11 @@ class FitResult:
         """Test i's RMS residual in its scored channel and that channel's unit
         (`"mm"` or `"N"`)."""
         drive = self.drive(i)
-        value = self.rmse_N[i] if drive.scores_force else self.rmse_mm[i]
+        if drive.scores_force:
+            assert self.rmse_N is not None  # set when a test is elongation-driven
+            value = self.rmse_N[i]
+        else:
+            value = self.rmse_mm[i]
         return float(value), drive.report_unit
 
     def outcome_text(self, failed: str = "NOT converged") -> str:
@@ -183,7 +187,8 @@ class FitResult:
             f"best of {len(self.start_losses)} start(s)",
             "",
         ]
-        if set(self.drives) <= {FORCE_DRIVEN}:
+        # equinox Modules hash (frozen); pyright takes them for unhashable.
+        if set(self.drives) <= {FORCE_DRIVEN}:  # pyright: ignore[reportUnhashable]
             lines.append(f"{'test':<24} {'samples':>8} {'RMSE mm':>10} {'RMSE %':>8}")
             for tid, k, mm, pct in self._per_test_rows():
                 lines.append(f"{tid[:24]:<24} {int(k):>8} {mm:>10.4f} {pct:>8.2f}")
