@@ -2,6 +2,8 @@
 checks of the arguments of `monte_carlo` (key, counts, percentile levels, devices, and
 the cables and their loads, brought to one cable axis) before anything is compiled."""
 
+from typing import Any
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -69,6 +71,7 @@ def check_key(key) -> PRNGKeyArray:
             raise ValueError(
                 f"`key` must be one key (shape ()), got shape {key.shape}."
             )
+        assert isinstance(key, jax.Array)  # NumPy has no key dtype
         return key
     if key.dtype == jnp.uint32 and key.shape == (2,):
         return jax.random.wrap_key_data(jnp.asarray(key))
@@ -92,7 +95,9 @@ def check_percentiles(percentiles) -> np.ndarray:
     return q
 
 
-def check_devices(devices) -> list[jax.Device]:
+# `jax.Device` is an alias that type checkers do not take for a type: `Any` stands for
+# it in the annotation.
+def check_devices(devices) -> list[Any]:
     """The devices to shard over (default `jax.devices()`: every device of every
     host); raise `ValueError` unless they are a non-empty list of jax devices."""
     if devices is None:

@@ -152,7 +152,7 @@ def empty_statistics(
     """
     sharding = NamedSharding(mesh, P(AXIS))
 
-    def full(shape, dt=dtype, fill=0):
+    def full(shape, dt=dtype, fill: float = 0):
         return global_array(np.full((mesh.size, *shape), fill, dt), sharding)
 
     return Statistics(
