@@ -389,9 +389,10 @@ def controller_step(
         if _checks.is_concrete(state.packed):
             with jax.ensure_compile_time_eval():  # a concrete state inside a trace
                 last = float(np.max(np.asarray(state.cables.time)))
-            if float(time) < last:
+            now = float(np.asarray(time))
+            if now < last:
                 raise ValueError(
-                    f"`time` must not go backwards: {float(time)} s after the previous "
+                    f"`time` must not go backwards: {now} s after the previous "
                     f"sample at {last} s."
                 )
     if _checks.is_concrete(forces):

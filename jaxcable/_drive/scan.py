@@ -209,8 +209,8 @@ def _solved_primal(drive, model, cable, checkpoint):
 
     def robust(c):
         passes, _ = c
-        args = loop_tied((drive, model, cable), passes)
-        return passes + 1, _pass(*args, ROBUST, checkpoint)
+        d, m, k = loop_tied((drive, model, cable), passes)
+        return passes + 1, _pass(d, m, k, ROBUST, checkpoint)
 
     _, (traj, roots) = jax.lax.while_loop(
         lambda c: need & (c[0] == 0), robust, (jnp.zeros((), jnp.int32), (traj, roots))
@@ -227,7 +227,8 @@ def _solved(drive, model, cable, *, checkpoint):
 def _solved_jvp(primals, tangents, *, checkpoint):
     # The solves are not differentiated: the history is replayed at its roots, each
     # root differentiated by the implicit function theorem (`implicit_root`).
-    traj, roots = _solved_primal(*primals, checkpoint)
+    drive, model, cable = primals
+    traj, roots = _solved_primal(drive, model, cable, checkpoint)
     roots = jax.lax.stop_gradient(roots)
     diff, rest = split_tangents(tangents, primals)
 

@@ -154,8 +154,9 @@ def strain_limit(model: AbstractCableModel) -> float:
     cable's own breaking strain (`Cable.breaking_strain`) is a separate check, made
     for every drive (`commit`).
     """
-    while isinstance(getattr(model, "base", None), AbstractCableModel):
-        model = model.base
+    base = getattr(model, "base", None)
+    while isinstance(base, AbstractCableModel):
+        model, base = base, getattr(base, "base", None)
     return float(getattr(type(model), "SOLVED_STRAIN_LIMIT", math.inf))
 
 
