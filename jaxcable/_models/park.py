@@ -16,6 +16,7 @@ which the rate-driven simulation solves for the loading time, not part of the mo
 `docs/model_notes.md` says why the equivalent force is no longer a state.
 """
 
+import dataclasses
 from typing import ClassVar
 
 import equinox as eqx
@@ -340,18 +341,10 @@ class IntegratedModel(AbstractCableModel[IntegratedState]):
         return _checks.domain_result(ok)
 
     def init(self, cable: Cable) -> IntegratedState:
+        # The unloaded cable: every field of the state is zero.
         zero = state_zero(cable, self.E1c)
-        return IntegratedState(
-            force=zero,
-            strain=zero,
-            force_max=zero,
-            permanent=zero,
-            short=zero,
-            long=zero,
-            short_max=zero,
-            long_max=zero,
-            flow=zero,
-        )
+        names = (f.name for f in dataclasses.fields(IntegratedState))
+        return IntegratedState(**dict.fromkeys(names, zero))
 
     def advance(
         self,
