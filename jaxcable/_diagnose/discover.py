@@ -224,6 +224,7 @@ def discover_terms(
     result, values = None, coefficients
     stderr = np.full(len(chosen), np.nan)
     if chosen and method.joint_fit:
+        assert isinstance(model, DiscoveredTerm)  # terms were chosen
         result = fit_quietly(
             Problem(
                 model,
@@ -419,7 +420,7 @@ def _select(regression: _Regression, columns: _Columns, min_gain_pct: float):
     # discovery.
     kind, labels = columns.kind, columns.labels
     empty = regression.solve([])
-    path = {(): (empty[0], regression.score(*empty))}
+    path: dict[tuple[str, ...], tuple] = {(): (empty[0], regression.score(*empty))}
     support: list[int] = []
     for _ in range(min(MAX_TERMS, len(set(kind)))):
         trials = []

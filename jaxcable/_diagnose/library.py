@@ -65,7 +65,11 @@ def step_inputs(test, covariate: str | None) -> dict[str, np.ndarray]:
     force_max = np.maximum.accumulate(np.maximum(force, 0.0))
     dt_loaded = np.asarray(
         jax.vmap(tension_time_step, in_axes=(0, 0, 0, None, 0))(
-            jnp.asarray(force0), jnp.asarray(force), jnp.asarray(dt), cable, force_max
+            jnp.asarray(force0),
+            jnp.asarray(force),
+            jnp.asarray(dt),
+            cable,
+            jnp.asarray(force_max),
         ),
         float,
     )

@@ -158,7 +158,11 @@ class _Signature:
                 f"its second differences change sign at {self.alternation:.0%} of "
                 "the samples (white noise: 73 %)"
             )
-        if self.step is not None and self.sigma2 < self.step / math.sqrt(12.0):
+        if (
+            self.step is not None
+            and self.sigma2 is not None
+            and self.sigma2 < self.step / math.sqrt(12.0)
+        ):
             return "its values lie on a grid finer than their noise shows"
         return ""
 
