@@ -234,9 +234,8 @@ def _run(name, repeats):
     # The same problem, start and jitted forward, for the solves alone.
     problem, u_user = fit_problem.make_problem(start, tests, names, per_test, None)
     solver = fit_solver.LevenbergMarquardt(rtol=1e-6, atol=1e-6)
-    kernel = fit_solver.fit_kernel(
-        problem, u_user, jax.random.key(0), solver, 256, "fwd", 1, 0.5
-    )
+    method = fit_solver.KernelMethod(solver, 256, "fwd", 1, 0.5)
+    kernel = fit_solver.fit_kernel(problem, u_user, jax.random.key(0), method)
     u0 = np.asarray(kernel.starts[0])
 
     # jaxcable's solve alone: the library's `solve` (what `fit_kernel` maps over the

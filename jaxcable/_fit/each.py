@@ -9,14 +9,12 @@ is vmapped over them, so that one compiled program solves them all.
 import dataclasses
 import warnings
 from collections.abc import Sequence
-from typing import Literal
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import jax.random as jr
 import numpy as np
-import optimistix as optx
 from jaxtyping import Array, Float, PRNGKeyArray
 
 from .._models import AbstractCableModel
@@ -27,7 +25,7 @@ from .data import PaddedTests, pad_tests
 from .fit import fit_result, least_squares_solver
 from .problem import ResidualProblem, make_problem, require_enough_samples
 from .result import FitResult, concrete_result
-from .solver import KernelOut, fit_kernel
+from .solver import KernelMethod, KernelOut, fit_kernel
 from .specimens import (
     Group,
     failed_result,
@@ -109,11 +107,7 @@ def each_kernel(
     data: PaddedTests,
     u_user: Float[Array, " p"],
     key: PRNGKeyArray,
-    solver: optx.AbstractGaussNewton,
-    max_steps: int,
-    jac: Literal["fwd", "bwd"],
-    num_starts: int,
-    spread: float,
+    method: KernelMethod,
 ) -> KernelOut:
     """`fit_kernel` of every specimen, vmapped: `problem` with its data replaced by
     each specimen's (`data`, stacked on a leading axis); the other arguments as in
@@ -131,14 +125,7 @@ def each_kernel(
 
     def one(d: PaddedTests) -> KernelOut:
         return fit_kernel(
-            eqx.tree_at(lambda p: p.data, problem, d),
-            u_user,
-            key,
-            solver,
-            max_steps,
-            jac,
-            num_starts,
-            spread,
+            eqx.tree_at(lambda p: p.data, problem, d), u_user, key, method
         )
 
     return jax.vmap(one)(data)
@@ -153,16 +140,12 @@ def _solve_group(
     per: tuple[str, ...],
 ) -> list[FitResult]:
     """The `FitResult` of every specimen of `group` (`checks`: the model's domain
-    check of each of their tests; `settings`: the kernel's `key, solver,
-    max_steps, multistart, spread`)."""
+    check of each of their tests; `settings`: the kernel's `key` and
+    `KernelMethod`)."""
     problem, u_user = group_problem(model, template, group)
     layout = problem.layout
-    key, solver, max_steps, multistart, spread = settings
-    # Every specimen has more fitted samples than parameters: forward mode, as
-    # `jaxcable.fit` chooses.
-    out = each_kernel(
-        problem, group.data, u_user, key, solver, max_steps, "fwd", multistart, spread
-    )
+    key, method = settings
+    out = each_kernel(problem, group.data, u_user, key, method)
     host = jax.device_get(out)
     bad_domain = np.asarray(checks._value) != int(RESULTS.successful._value)
     units = tuple(u for u, s in zip(layout.units, layout.sizes) for _ in range(s))
@@ -183,7 +166,9 @@ def _solve_group(
                 fit_result(out_j, here, tests, layout.labels, units, per, False)
             )
             continue
-        results.append(failed_result(model, here, tests, per, multistart, member))
+        results.append(
+            failed_result(model, here, tests, per, method.num_starts, member)
+        )
     return results
 
 
@@ -300,7 +285,12 @@ def fit_each(
             raise ValueError(f"`problems[{k}]`: {e}") from None
     layout = problem.layout
     per = tuple(n for n, q in zip(layout.names, layout.per_test) if q)
-    settings = (key, solver, method.max_steps, method.multistart, method.spread)
+    # Every specimen has more fitted samples than parameters: forward mode, as
+    # `jaxcable.fit` chooses.
+    kernel = KernelMethod(
+        solver, method.max_steps, "fwd", method.multistart, method.spread
+    )
+    settings = (key, kernel)
     results: list = [None] * len(specimen_list)
     label = f"fitting {len(specimen_list)} specimens"
     with meter.bar(label), warnings.catch_warnings():

@@ -33,7 +33,7 @@ import equinox as eqx
 import jax
 import optimistix as optx
 
-from .solver import KernelOut, fit_kernel
+from .solver import KernelMethod, KernelOut, fit_kernel
 
 
 # The kernel `jaxcable.fit` calls: `fit_kernel`, unless `cached_fit_kernels` is in
@@ -113,13 +113,14 @@ def _avals(xs) -> list:
     return [(tuple(x.shape), str(x.dtype)) for x in xs]
 
 
-def _split(problem, u_user, key, solver, max_steps, jac, num_starts, spread):
+def _split(problem, u_user, key, method: KernelMethod):
     """The fit kernel's arguments as (static, treedef, array leaves, key impl): the
     key goes in as its raw data (exported programs take plain arrays)."""
-    args = (problem, u_user, jax.random.key_data(key), solver)
+    args = (problem, u_user, jax.random.key_data(key), method.solver)
     dynamic, static = eqx.partition(args, eqx.is_array)
     leaves, treedef = jax.tree.flatten(dynamic)
-    settings = (max_steps, jac, num_starts, spread, str(jax.random.key_impl(key)))
+    impl = str(jax.random.key_impl(key))
+    settings = (method.max_steps, method.jac, method.num_starts, method.spread, impl)
     return (static, settings), treedef, leaves, jax.random.key_impl(key)
 
 
@@ -135,9 +136,8 @@ def _export(static, settings, treedef, leaves, impl):
         dynamic = jax.tree.unflatten(treedef, leaves)
         problem, u_user, key_data, solver = eqx.combine(dynamic, static)
         key = jax.random.wrap_key_data(key_data, impl=impl)
-        out = fit_kernel(
-            problem, u_user, key, solver, max_steps, jac, num_starts, spread
-        )
+        method = KernelMethod(solver, max_steps, jac, num_starts, spread)
+        out = fit_kernel(problem, u_user, key, method)
         out_leaves, structure = jax.tree.flatten(out)
         out_tree.append(structure)
         return out_leaves
@@ -189,16 +189,10 @@ def _cached_call(
     problem,
     u_user,
     key,
-    solver,
-    max_steps,
-    jac,
-    num_starts,
-    spread,
+    method: KernelMethod,
 ) -> KernelOut:
     """`fit_kernel` through the exported program of its configuration."""
-    static, treedef, leaves, impl = _split(
-        problem, u_user, key, solver, max_steps, jac, num_starts, spread
-    )
+    static, treedef, leaves, impl = _split(problem, u_user, key, method)
     path = directory / f"fit-{_fingerprint(static, treedef, leaves)}-cache"
     structure = _out_structure(problem)
     exported = _read(path)
@@ -207,8 +201,6 @@ def _cached_call(
     if exported is None:
         exported, traced = _export(*static, treedef, leaves, impl)
         if traced != structure:
-            return fit_kernel(
-                problem, u_user, key, solver, max_steps, jac, num_starts, spread
-            )
+            return fit_kernel(problem, u_user, key, method)
         _write(path, exported)
     return jax.tree.unflatten(structure, exported.call(*leaves))

@@ -11,7 +11,6 @@ Jacobian at the optimum.
 
 import math
 import warnings
-from typing import Literal
 
 import equinox as eqx
 import jax
@@ -20,7 +19,7 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import PRNGKeyArray
 
-from .._drive import FORCE_DRIVEN, Simulation
+from .._drive import FORCE_DRIVEN
 from .._models import MODELS, AbstractCableModel, transform_table
 from .._problem import LeastSquares, Problem
 from .._results import RESULTS
@@ -36,7 +35,8 @@ from .problem import (
     require_enough_samples,
 )
 from .result import FitResult, concrete_result
-from .solver import KernelOut, LevenbergMarquardt
+from .solver import KernelMethod, KernelOut, LevenbergMarquardt
+from .specimens import failing_start
 from .start import StartMovedWarning, start_scaling
 from .statistics import (
     IdentifiabilityWarning,
@@ -57,19 +57,12 @@ def _require_valid_start(out: KernelOut, tests: list, problem: ResidualProblem) 
     """Raise a `StartError` if the user's start does not simulate finitely on every
     test, with the simulation's own reason (re-run for the first such test, by its
     drive)."""
-    bad = np.flatnonzero(~np.asarray(out.start_ok))
-    if not bad.size:
+    ok = np.asarray(out.start_ok)
+    if ok.all():
         return
-    i = int(bad[0])
-    test, drive = tests[i], problem.data.drive[i]
     model = eqx.combine(problem.base, problem.static)
-    traj = drive.simulate(
-        model,
-        test.cable(),
-        test.time,
-        drive.imposed_of(test),
-        method=Simulation(throw=False),
-    )
+    i, traj = failing_start(model, tests, problem.data.drive, ok)
+    test, drive = tests[i], problem.data.drive[i]
     reason = str(RESULTS[traj.result]) or (
         "the simulation is not finite or a parameter is outside its domain for this "
         "cable (e.g. Park's t_r2 = lambda1 (L0/v)^2 - lambda2 <= 0)"
@@ -114,11 +107,7 @@ def run_kernel(
     problem: ResidualProblem,
     u0,
     key: PRNGKeyArray | None,
-    solver: optx.AbstractGaussNewton,
-    max_steps: int,
-    jac: Literal["fwd", "bwd"],
-    multistart: int,
-    spread: float,
+    method: KernelMethod,
     test_list: list,
 ) -> KernelOut:
     """The fit kernel run on `problem` from `u0` (the arguments as in `fit_kernel`;
@@ -128,7 +117,7 @@ def run_kernel(
         key = jr.key(0)
     # `fit_kernel`, or the command line's exported programs (`cached_fit_kernels`).
     kernel = current_fit_kernel()
-    out = kernel(problem, u0, key, solver, max_steps, jac, multistart, spread)
+    out = kernel(problem, u0, key, method)
     _require_valid_start(out, test_list, problem)
     return out
 
@@ -337,17 +326,10 @@ def fit(
         p = residual_problem.layout.size
         n = require_enough_samples(residual_problem.data, p)
         jac = "fwd" if p <= n else "bwd"
-        out = run_kernel(
-            residual_problem,
-            u_user,
-            method.key,
-            solver,
-            method.max_steps,
-            jac,
-            method.multistart,
-            method.spread,
-            test_list,
+        kernel = KernelMethod(
+            solver, method.max_steps, jac, method.multistart, method.spread
         )
+        out = run_kernel(residual_problem, u_user, method.key, kernel, test_list)
         return residual_problem, out
 
     (residual_problem, out), note = with_moved_start(

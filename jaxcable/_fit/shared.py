@@ -34,6 +34,7 @@ from .problem import (
     require_enough_samples,
 )
 from .result import FitResult
+from .solver import KernelMethod
 
 
 def shared_layout(
@@ -110,6 +111,7 @@ def fit_subset(
     solver = least_squares_solver(
         LeastSquares(solver, max_steps, multistart, spread, key)
     )
+    kernel = KernelMethod(solver, max_steps, "fwd", multistart, spread)
     test_list = as_test_list(tests)
     free = tuple(free)
     data = pad_tests(test_list, drive=drive, covariate=covariate)
@@ -118,9 +120,7 @@ def fit_subset(
     def attempt(model):
         # Checked, then run: a start that fails on a test is moved (as `fit`).
         problem, v0 = _subset_problem(model, layout, free, order, size, data, test_list)
-        out = run_kernel(
-            problem, v0, key, solver, max_steps, "fwd", multistart, spread, test_list
-        )
+        out = run_kernel(problem, v0, key, kernel, test_list)
         return problem, out
 
     (problem, out), note = with_moved_start(model, test_list, drive, attempt)

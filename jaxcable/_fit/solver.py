@@ -301,6 +301,26 @@ def _data_derived_start(
     return u_user + power * final.best_log_c, finite[0]
 
 
+class KernelMethod(eqx.Module):
+    """How the fit kernel solves: a `jaxcable.LeastSquares` resolved for one
+    problem (its solver built, its Jacobian mode chosen).
+
+    **Fields:**
+
+    - `solver`: an optimistix Gauss-Newton-type solver.
+    - `max_steps`: solver steps per start.
+    - `jac`: the Jacobian's mode, `"fwd"` or `"bwd"`.
+    - `num_starts`: the number of starts (the data-derived one, then perturbed ones).
+    - `spread`: the standard deviation of the perturbations in u.
+    """
+
+    solver: optx.AbstractGaussNewton
+    max_steps: int = eqx.field(static=True)
+    jac: Literal["fwd", "bwd"] = eqx.field(static=True)
+    num_starts: int = eqx.field(static=True)
+    spread: float = eqx.field(static=True)
+
+
 class KernelOut(eqx.Module):
     """What the fit kernel returns.
 
@@ -343,13 +363,9 @@ def fit_kernel(
     problem: ResidualProblem,
     u_user: Float[Array, " p"],
     key: PRNGKeyArray,
-    solver: optx.AbstractGaussNewton,
-    max_steps: int,
-    jac: Literal["fwd", "bwd"],
-    num_starts: int,
-    spread: float,
+    method: KernelMethod,
 ) -> KernelOut:
-    """The whole fit, compiled: the data-derived start, `num_starts` least-squares
+    """The whole fit, compiled: the data-derived start, `method.num_starts` least-squares
     solves and the chosen optimum (see [`jaxcable.fit`][]).
 
     **Arguments:**
@@ -357,18 +373,16 @@ def fit_kernel(
     - `problem`: the least-squares problem.
     - `u_user`: the user's start in u.
     - `key`: the key of the start perturbations.
-    - `solver`: an optimistix Gauss-Newton-type solver.
-    - `max_steps`: solver steps per start.
-    - `jac`: the Jacobian's mode, `"fwd"` or `"bwd"`.
-    - `num_starts`: the number of starts (the data-derived one, then perturbed ones).
-    - `spread`: the standard deviation of the perturbations in u.
+    - `method`: the `KernelMethod` (solver, steps, Jacobian mode, starts, spread).
 
     **Returns:**
 
     A `KernelOut`.
     """
     u_start, start_ok = _data_derived_start(problem, u_user)
-    noise = spread * jr.normal(key, (num_starts - 1, u_user.shape[0]), u_user.dtype)
+    solver, max_steps, jac = method.solver, method.max_steps, method.jac
+    shape = (method.num_starts - 1, u_user.shape[0])
+    noise = method.spread * jr.normal(key, shape, u_user.dtype)
     starts = jnp.concatenate([u_start[None], u_start[None] + noise])
     data = problem.data
     # The starts in lockstep (one vmapped solve, as long as the slowest start): the

@@ -8,7 +8,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._drive import Simulation
+from .._drive import Simulation, Trajectory
 from .._models import AbstractCableModel
 from .._results import RESULTS
 from .data import PaddedTests, test_id
@@ -124,10 +124,10 @@ def group_problem(
     return problem, jnp.asarray(start, jnp.result_type(float))
 
 
-def start_failure(model, tests: list, drives, ok: np.ndarray) -> RESULTS:
-    """Why the start does not simulate on a specimen's tests (`ok` False for some):
-    the simulation's result on the first such test, re-run as `jaxcable.fit` does
-    for its error."""
+def failing_start(model, tests: list, drives, ok: np.ndarray) -> tuple[int, Trajectory]:
+    """The first test on which the start does not simulate (`ok` False for some),
+    and its simulation re-run without raising, for the reason: `(index,
+    trajectory)`."""
     i = int(np.flatnonzero(~ok)[0])
     test, drive = tests[i], drives[i]
     traj = drive.simulate(
@@ -137,6 +137,14 @@ def start_failure(model, tests: list, drives, ok: np.ndarray) -> RESULTS:
         drive.imposed_of(test),
         method=Simulation(throw=False),
     )
+    return i, traj
+
+
+def start_failure(model, tests: list, drives, ok: np.ndarray) -> RESULTS:
+    """Why the start does not simulate on a specimen's tests (`ok` False for some):
+    the simulation's result on the first such test, re-run as `jaxcable.fit` does
+    for its error."""
+    _, traj = failing_start(model, tests, drives, ok)
     result = concrete_result(jax.device_get(traj.result))
     # The residuals were not finite although the simulation succeeded: a start
     # the solver cannot use, as when every start fails.
