@@ -8,7 +8,7 @@ import dataclasses
 import math
 import warnings
 from collections.abc import Iterable
-from typing import Literal, NamedTuple
+from typing import Any, Literal, NamedTuple
 
 import equinox as eqx
 import numpy as np
@@ -20,7 +20,7 @@ from .._problem import LeastSquares, Problem
 from .rule import MIN_GAIN_PCT
 
 
-def _as_ids(ids):
+def _as_ids(ids) -> Any:
     # A tuple, hashable as a static field; a lone string or a non-sequence is kept
     # for __check_init__ to refuse with the field's name.
     if isinstance(ids, Iterable) and not isinstance(ids, str):
