@@ -10,11 +10,13 @@ from typing import Any
 
 import numpy as np
 
-from .._drive import FORCE_DRIVEN, as_test_drive
+from .._drive import FORCE_DRIVEN, AbstractTestDrive, as_test_drive
 from .._fit import as_test_list
 
 
-def _features(test, drive=FORCE_DRIVEN) -> dict[str, np.ndarray]:
+def _features(
+    test, drive: AbstractTestDrive | str = FORCE_DRIVEN
+) -> dict[str, np.ndarray]:
     """Per-sample explanatory variables of a residual, from the test's own record.
     Cycles and the loading/unloading/hold branches follow the channel the test
     imposed (`drive`): a relaxing force in a hold of the elongation is a hold."""
@@ -126,7 +128,7 @@ def residual_structure(
     tests,
     residual: Sequence[np.ndarray],
     *,
-    drives: Sequence[str] | None = None,
+    drives: Sequence[AbstractTestDrive | str] | None = None,
     unit: str = "mm",
 ) -> dict[str, Any]:
     """How the residuals of a fit depend on the test conditions.
@@ -220,7 +222,7 @@ def residual_structure(
     }
     return {
         "correlation": correlation,
-        "strongest": max(valid, key=valid.get) if valid else None,
+        "strongest": max(valid, key=valid.__getitem__) if valid else None,
         "autocorrelation": float(np.mean(lag)) if lag else float("nan"),
         "white_noise_band": 1.96 / math.sqrt(max(r_all.size, 1)),
         "mean_mm": dict(mean) if unit == "mm" else dict.fromkeys(mean),
