@@ -228,7 +228,7 @@ def check_family(
     ratio = heldout / noise if noise > 0 else math.inf
     lag = float(fitted.structure["autocorrelation"])
     label = own or type(model).__name__
-    facts = dict(ratio=ratio, autocorrelation=lag)
+    facts: dict[str, Any] = dict(ratio=ratio, autocorrelation=lag)
     wanted = search.family
     far = is_far(heldout, noise, lag)
     if wanted is False or own is None or not (far or wanted):
