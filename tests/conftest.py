@@ -162,6 +162,8 @@ SLOW_FIRST = (
     "tests/test_drive.py",  # 41 s
     "tests/test_rounds.py",  # 38 s
     "tests/test_fit.py",  # 38 s
+    "tests/test_docs.py",  # 40 s, every page's examples and the strict site build
+    "tests/test_problem.py",  # about 30 s
     "tests/test_cli.py",  # 37 s
     f"{NOTEBOOK_RUNS}02_fit.ipynb]",  # 35 s
     "tests/test_cdpr.py",  # 31 s
