@@ -16,6 +16,7 @@ import optimistix as optx
 from jaxtyping import PRNGKeyArray
 
 from ._checks import require_int, require_number
+from ._drive import DriveSpec
 from ._io import TestData
 from ._models import AbstractCableModel
 
@@ -109,7 +110,7 @@ class Problem(eqx.Module):
     transforms: tuple[tuple[str, str], ...] = eqx.field(
         default=(), converter=_as_transforms, static=True
     )
-    drive: object = eqx.field(default="auto", converter=_as_drive, static=True)
+    drive: DriveSpec = eqx.field(default="auto", converter=_as_drive, static=True)
     covariate: str | None = eqx.field(default=None, static=True)
 
     def __check_init__(self):

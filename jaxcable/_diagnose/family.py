@@ -19,6 +19,7 @@ import dataclasses
 import math
 from typing import Any
 
+from .._drive import DriveSpec
 from .._fit import scaled_start
 from .._json import jsonable
 from .._models import (
@@ -157,7 +158,7 @@ def family_of(model: AbstractCableModel) -> str | None:
     return type(model).CLI_NAME if type(model) in FAMILIES else None
 
 
-def family_start(cls: type, tests, drive="auto") -> AbstractCableModel:
+def family_start(cls: type, tests, drive: DriveSpec = "auto") -> AbstractCableModel:
     """The start of a family's fit on `tests` (each test's `drive`): the class's
     defaults scaled to the data ([`jaxcable.scaled_start`][]: the stiffness of the
     first loading, the retardation times of the holds), so that every family

@@ -18,7 +18,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .._drive import FORCE_DRIVEN, AbstractTestDrive, as_test_drive
+from .._drive import FORCE_DRIVEN, AbstractTestDrive, DriveSpec, as_test_drive
 from .._fit import (
     FitResult,
     as_test_list,
@@ -63,7 +63,7 @@ def _drive_names(drive):
 def model_outputs(
     result: FitResult | AbstractCableModel,
     tests: Sequence[TestData],
-    drive=FORCE_DRIVEN,
+    drive: DriveSpec = FORCE_DRIVEN,
     covariate: str | None = None,
 ) -> list[np.ndarray]:
     """The fitted model's value of every test's scored channel at every sample,
@@ -194,7 +194,7 @@ class Scoring(NamedTuple):
         return pooled_rmse(residual, masks, self.factor)
 
 
-def scoring(tests, drive="auto", covariate: str | None = None) -> Scoring:
+def scoring(tests, drive: DriveSpec = "auto", covariate: str | None = None) -> Scoring:
     """The [`Scoring`][] of a diagnosis of `tests` under `drive` (`"auto"`, a drive
     name or value, or one per test; see [`jaxcable.fit`][]), its models driven by the
     extra column `covariate` (or none).

@@ -20,6 +20,7 @@ from .driven import (
     TEST_DRIVES as TEST_DRIVES,
     AbstractTestDrive as AbstractTestDrive,
     ChannelDrive as ChannelDrive,
+    DriveSpec as DriveSpec,
     as_test_drive as as_test_drive,
 )
 from .drives import (

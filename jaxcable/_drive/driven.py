@@ -9,7 +9,8 @@ appear only where a drive is read or written (JSON, CSV metadata, the command li
 """
 
 import abc
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
+from typing import TypeAlias
 
 import equinox as eqx
 import numpy as np
@@ -85,6 +86,13 @@ class ChannelDrive(AbstractTestDrive):
 
     def simulate(self, model, cable, time, imposed, **kwargs) -> Trajectory:
         return self.simulator(model, cable, time, imposed, **kwargs)
+
+
+# What `drive` arguments take (a `Problem`'s, a fit's, a diagnosis's): `"auto"` or
+# None (detected per test), a drive's name or value, or one of these per test.
+DriveSpec: TypeAlias = (
+    "str | AbstractTestDrive | Sequence[str | AbstractTestDrive] | None"
+)
 
 
 # Force-driven: the force history drives the model, the elongation is scored.

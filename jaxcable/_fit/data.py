@@ -13,7 +13,7 @@ from numpy.typing import DTypeLike
 
 from .. import _checks
 from .._cable import ZERO_CELSIUS, Cable
-from .._drive import ELONGATION_DRIVEN, FORCE_DRIVEN, AbstractTestDrive
+from .._drive import ELONGATION_DRIVEN, FORCE_DRIVEN, AbstractTestDrive, DriveSpec
 from .._io import ControlDetection, TestData, force_noise, resolve_control
 
 
@@ -240,7 +240,7 @@ def _checked_row(
     )
 
 
-def resolve_drives(tests, drive=None) -> list[ControlDetection]:
+def resolve_drives(tests, drive: DriveSpec = None) -> list[ControlDetection]:
     """The drive of every test, and why ([`jaxcable.ControlDetection`][]).
 
     **Arguments:**

@@ -18,7 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._cable import Cable
-from .._drive import Simulation, simulate_force_history
+from .._drive import DriveSpec, Simulation, simulate_force_history
 from .._models import (
     AbstractCableModel,
     AbstractExtension,
@@ -256,7 +256,7 @@ def _factor(model, loadings: list[_Loading]) -> float:
 
 
 def start_scaling(
-    model: AbstractCableModel, tests, *, drive: object = "auto"
+    model: AbstractCableModel, tests, *, drive: DriveSpec = "auto"
 ) -> StartScaling:
     """[`jaxcable.scaled_start`][], with the factors it applied.
 
@@ -296,7 +296,7 @@ def start_scaling(
     return StartScaling(scaled, stiffness, time_factor, hold, longest)
 
 
-def scaled_start(model: AbstractCableModel, tests, *, drive="auto"):
+def scaled_start(model: AbstractCableModel, tests, *, drive: DriveSpec = "auto"):
     """`model` with its start values scaled to a data set: its stiffness to the
     data's first loading, its retardation times to the data's holds when they are
     far off.
@@ -354,7 +354,9 @@ def _finite_per_test(problem, u):
     return jnp.all(jnp.isfinite(problem.residuals(u)), axis=1)
 
 
-def start_failure(model: AbstractCableModel, tests, *, drive="auto") -> str:
+def start_failure(
+    model: AbstractCableModel, tests, *, drive: DriveSpec = "auto"
+) -> str:
     """Why `model`'s start values fail on `tests`, or "" when they do not: outside
     their domain for a test's cable, or a simulation of a test that is not finite
     or goes beyond break (as [`jaxcable.fit`][] would find them).
