@@ -53,7 +53,7 @@ import equinox as eqx
 import jax.numpy as jnp
 
 from .._fit import FitResult, field_at
-from .._models import DiscoveredTerm
+from .._models import AbstractExtension, DiscoveredTerm
 from .._problem import LeastSquares, Problem
 from .._progress import AbstractProgressMeter
 from .diagnosis import Candidate, Diagnosis
@@ -183,6 +183,8 @@ def _layer_fields(result: FitResult, prefix: str) -> tuple[str, ...]:
     layer = field_at(result.model, prefix[:-1]) if prefix else result.model
     if isinstance(layer, DiscoveredTerm):
         return layer.used_fields()
+    # Every cause wraps the model before it in an extension.
+    assert isinstance(layer, AbstractExtension), type(layer).__name__
     return type(layer).EFFECT_FIELDS
 
 
@@ -221,10 +223,17 @@ def partial_cause(d: Diagnosis) -> Candidate | None:
     return max(known or able, key=lambda c: c.gain_pct, default=None)
 
 
+def _fit_of(cause: Candidate) -> FitResult:
+    """The fit of a cause the rounds go on with: a named or partial cause is always
+    a fitted candidate."""
+    assert cause.fit is not None, f"the cause {cause.id!r} has no fit"
+    return cause.fit
+
+
 def next_base(base: RoundBase, cause: Candidate) -> RoundBase:
     """The base of the next round: the model of `cause`'s fit (per-test values
     averaged), its fitted parameters free."""
-    fit = cause.fit
+    fit = _fit_of(cause)
     names = tuple(dict.fromkeys(n.split("[")[0] for n in fit.names))
     problem = dataclasses.replace(
         base.problem,
@@ -292,7 +301,7 @@ class _Chain:
         self.plans: list[Plan] = []
         self.kept = 0
         self.pending: int | None = None
-        self.final = None
+        self.final: tuple[Plan, FitResult, float] | None = None
 
     def add(self, d: Diagnosis, plan: Plan, last: bool) -> Candidate | None:
         """Record round `d`: the cause the rounds go on with (named, or partial
@@ -301,11 +310,11 @@ class _Chain:
         self.plans.append(plan)
         cause = d.candidate(d.named_cause) if d.verdict == "named" else None
         partial = partial_cause(d) if cause is None and not last else None
-        if cause is None and partial is None:
+        cause = cause if cause is not None else partial
+        if cause is None:
             self._confirm_by_base(d, plan, k)
             self.rounds.append(d)
             return None
-        cause = cause or partial
         self.rounds.append(_with_cause(d, cause))
         if partial is not None:
             # A chain of partial causes is judged from its first round on.
@@ -351,7 +360,7 @@ class _Chain:
             for i, r in enumerate(self.rounds)
         ]
 
-    def final_model(self):
+    def final_model(self) -> tuple[Plan, FitResult, float]:
         """`(plan, fit, held-out RMSE)` of the model with every kept cause: the last
         kept cause's fit, on its round's plan (driven by its covariate), unless a
         later round's base confirmed the chain."""
@@ -361,7 +370,7 @@ class _Chain:
         cause = last.candidate(last.named_cause)
         plan = self.plans[self.kept - 1]
         how = plan.how._replace(covariate=cause.covariate or plan.how.covariate)
-        return dataclasses.replace(plan, how=how), cause.fit, cause.heldout_rmse
+        return dataclasses.replace(plan, how=how), _fit_of(cause), cause.heldout_rmse
 
 
 def _known_chain(rounds: list[Diagnosis], pending: int) -> bool:
@@ -416,11 +425,16 @@ def _combined(rounds: list[Diagnosis], kept: int, pruned: Pruned | None) -> Diag
             gain_pct=0.0,
             effect={},
         )
+    final_rmse, final_fit = first.base_heldout_rmse, None
+    if causes:
+        # Kept causes are always pruned (`diagnose_rounds`).
+        assert pruned is not None, "kept causes without a pruning"
+        final_rmse, final_fit = pruned.heldout_rmse, pruned.fit
     return dataclasses.replace(
         top,
         causes=tuple(r.named_cause for r in causes),
         cause_gains=tuple(r.gain_pct for r in causes),
-        final_heldout_rmse=(pruned.heldout_rmse if causes else first.base_heldout_rmse),
-        final_fit=pruned.fit if causes else None,
+        final_heldout_rmse=final_rmse,
+        final_fit=final_fit,
         rounds=tuple(rounds) if len(rounds) > 1 else (),
     )

@@ -81,6 +81,10 @@ class Round:
     - `found`: the scored candidates so far.
     - `decision`: the verdict on them.
     - `discovered`: the discovery stage's term, or None.
+
+    A stage after `plan_stage` reads the plan and the base's fit as `planned` and
+    `base_fit`, one after `verdict_stage` the verdict as `decided`: each says which
+    stage it needs when that stage has not run.
     """
 
     base: RoundBase
@@ -92,6 +96,24 @@ class Round:
     found: tuple[Candidate, ...] = ()
     decision: Verdict | None = None
     discovered: Discovered | None = None
+
+    @property
+    def planned(self) -> Plan:
+        """The round's plan (`plan_stage` has run)."""
+        assert self.plan is not None, "plan_stage has not run"
+        return self.plan
+
+    @property
+    def base_fit(self) -> BaseFit:
+        """The base's fit and scores (`plan_stage` has run)."""
+        assert self.fitted is not None, "plan_stage has not run"
+        return self.fitted
+
+    @property
+    def decided(self) -> Verdict:
+        """The verdict on the candidates (`verdict_stage` has run)."""
+        assert self.decision is not None, "verdict_stage has not run"
+        return self.decision
 
 
 def plan_stage(state: Round, search: CandidateSearch, meter) -> Round:
@@ -110,7 +132,7 @@ def family_stage(state: Round, search: CandidateSearch, meter) -> Round:
     if not state.first:
         return state
     family, start = check_family(
-        state.base.problem, state.plan, state.fitted, state.noise, search, meter
+        state.base.problem, state.planned, state.base_fit, state.noise, search, meter
     )
     state = dataclasses.replace(state, family=family)
     if start is None:
@@ -123,15 +145,16 @@ def family_stage(state: Round, search: CandidateSearch, meter) -> Round:
 def catalogue_stage(state: Round, search: CandidateSearch, meter) -> Round:
     """The catalogue's candidates fitted around the base and scored."""
     model = state.base.problem.model
-    found = score_catalogue(state.plan, model, state.fitted, progress_meter=meter)
+    found = score_catalogue(state.planned, model, state.base_fit, progress_meter=meter)
     return dataclasses.replace(state, found=state.found + found)
 
 
 def covariates_stage(state: Round, search: CandidateSearch, meter) -> Round:
     """The covariates' forms, on the time split of force-driven tests."""
-    if not state.plan.on_time_split_in_mm:
+    plan = state.planned
+    if not plan.on_time_split_in_mm:
         return state
-    found = covariate_candidates(state.plan, state.fitted, search.one_start, meter)
+    found = covariate_candidates(plan, state.base_fit, search.one_start, meter)
     return dataclasses.replace(state, found=state.found + found)
 
 
@@ -146,14 +169,15 @@ def discovery_stage(state: Round, search: CandidateSearch, meter) -> Round:
     (`_discovery_may_beat`); named instead of that cause only when it beats it by
     `MIN_GAIN_PCT` %."""
     auto = search.discover is None
-    wanted = state.decision.verdict == "unexplained" if auto else search.discover
+    before = state.decided
+    wanted = before.verdict == "unexplained" if auto else search.discover
     unused = auto and _discovery_may_beat(state)
-    if not ((wanted or unused) and state.plan.on_time_split_in_mm):
+    plan = state.planned
+    if not ((wanted or unused) and plan.on_time_split_in_mm):
         return state
-    discovered = discovered_candidate(state.plan, state.fitted, search.one_start, meter)
+    discovered = discovered_candidate(plan, state.base_fit, search.one_start, meter)
     if discovered is None:
         return state
-    before = state.decision
     state = dataclasses.replace(
         state, found=state.found + (discovered.candidate,), discovered=discovered
     )
@@ -182,12 +206,12 @@ def one_round(
     state = Round(base, first=first)
     for stage in STAGES:
         state = stage(state, search, meter)
-    return conclude(state), state.plan, state.base
+    return conclude(state), state.planned, state.base
 
 
 def verdict(state: Round) -> Verdict:
     """The verdict on the round's candidates (`decide`)."""
-    base = state.fitted
+    base = state.base_fit
     return decide(
         base.score.heldout_rmse,
         state.noise,
@@ -202,14 +226,14 @@ def _discovery_may_beat(state: Round) -> bool:
     x the noise held out and either reads none of the recorded covariates (nor does
     the base) or reads one through a covariate form (the catalogue's have no
     memory)."""
-    decision = state.decision
-    if decision.verdict != "named":
+    decision = state.decided
+    if decision.verdict != "named" or decision.named is None:
         return False
     named = state.found[decision.named]
     if not named.heldout_rmse > MIN_EXCESS * state.noise:
         return False
     read = {state.base.problem.covariate, named.covariate}
-    unused = [c for c in state.plan.columns if c not in read]
+    unused = [c for c in state.planned.columns if c not in read]
     return bool(unused) or named.covariate is not None
 
 
@@ -229,7 +253,7 @@ def _named_unless_beaten(before: Verdict, after: Verdict, found) -> Verdict:
 def _scored(state: Round) -> tuple[Candidate, ...]:
     """Each candidate with its shares of the excess (on squares and on RMSEs) and,
     when it diverges, where."""
-    plan, base, noise = state.plan, state.fitted, state.noise
+    plan, base, noise = state.planned, state.base_fit, state.noise
     held = base.score.heldout_rmse
     return tuple(
         dataclasses.replace(
@@ -242,7 +266,7 @@ def _scored(state: Round) -> tuple[Candidate, ...]:
                 else ""
             ),
         )
-        for c, share in zip(state.found, state.decision.explained_pct)
+        for c, share in zip(state.found, state.decided.explained_pct)
     )
 
 
@@ -250,7 +274,7 @@ def conclude(state: Round) -> Diagnosis:
     """The [`jaxcable.Diagnosis`][] of one round's stages: each candidate with its
     shares of the excess and, when it diverges, where; the named cause (or
     `"none"` / `"unexplained"`) and its effect."""
-    plan, base, decision = state.plan, state.fitted, state.decision
+    plan, base, decision = state.planned, state.base_fit, state.decided
     held = base.score.heldout_rmse
     out = _scored(state)
     named, extended, gain, effect = _named(out, decision, held)
