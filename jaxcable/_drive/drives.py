@@ -94,7 +94,7 @@ def force_step(
     )
 
 
-class ForceDrive(AbstractDrive):
+class ForceDrive(AbstractDrive[ForceSample]):
     """A time-stamped force history, from the unloaded cable at its first time."""
 
     samples: ForceSample
@@ -176,7 +176,9 @@ def _first_guess(model, cable, state: CableState, sample: RateSample):
     return jnp.where(branch != 0, jump, duration).astype(state.last_step.dtype)
 
 
-def _rate_guess(model, cable, state: CableState, sample: RateSample, solve: Solve):
+def _rate_guess(
+    model, cable, state: CableState, sample: RateSample, solve: Solve
+) -> Float[Array, ""]:
     """The initial guess of a sample's time, s. Inside a ramp, the previous step's
     duration (samples are close and creep is smooth, so two Newton steps suffice);
     at the start of a ramp or on a hold, `_first_guess`; to replay, the known root.
@@ -184,7 +186,7 @@ def _rate_guess(model, cable, state: CableState, sample: RateSample, solve: Solv
     vmapped batch the cond stays a branch and the first-sample guess costs nothing
     on the other samples."""
     if solve.how == REPLAY:
-        return solve.root
+        return solve.known_root
     if solve.how == FAST and not branches_are_cheap():
         first = _first_guess(model, cable, state, sample)
         return jnp.where(sample.continues, state.last_step, first)
@@ -195,7 +197,7 @@ def _rate_guess(model, cable, state: CableState, sample: RateSample, solve: Solv
     )
 
 
-class RateDrive(AbstractDrive):
+class RateDrive(AbstractDrive[RateSample]):
     """A rate-driven test: the crosshead moves at `cable.speed` along each ramp, so
     the strain follows eps_kin(t) = eps_start +/- (v / L0) (t - t_start) (Park Eq. 6),
     and the time of each force sample is the root of model strain minus eps_kin
@@ -332,7 +334,7 @@ def _force_guess(state: CableState, cable: Cable, problem: _ForceProblem):
     )
 
 
-class ElongationDrive(AbstractDrive):
+class ElongationDrive(AbstractDrive[ElongationSample]):
     """A time-stamped elongation history, from the unloaded cable at its first time.
 
     The branch follows the sign of the imposed elongation change; below the cable's
@@ -358,7 +360,7 @@ class ElongationDrive(AbstractDrive):
         r_zero, at_zero = _force_residual(zero, problem)
         slack = r_zero >= 0
         if solve.how == REPLAY:
-            guess = solve.root
+            guess = solve.known_root
         else:
             guess = _force_guess(state, cable, problem)
         # Strain rises with force; a flat slope (0 N under hardening) grows the force.

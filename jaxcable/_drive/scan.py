@@ -17,6 +17,7 @@ derivatives are taken (the implicit function theorem at each root).
 """
 
 import abc
+from typing import Generic, TypeVar
 
 import equinox as eqx
 import jax
@@ -56,9 +57,19 @@ class Solve(eqx.Module):
     how: str = eqx.field(static=True)
     root: Float[Array, ""] | None = None
 
+    @property
+    def known_root(self) -> Float[Array, ""]:
+        """`root`, which a `REPLAY` solve is given."""
+        assert self.root is not None, "a REPLAY solve is given its root"
+        return self.root
 
-class AbstractDrive(eqx.Module):
-    """A way of driving one cable through a history, one sample at a time."""
+
+_Sample = TypeVar("_Sample", bound=AbstractSample)
+
+
+class AbstractDrive(eqx.Module, Generic[_Sample]):
+    """A way of driving one cable through a history, one sample at a time, each a
+    `_Sample` (the drive's `AbstractSample`)."""
 
     @property
     def two_pass(self) -> bool:
@@ -70,7 +81,7 @@ class AbstractDrive(eqx.Module):
     @abc.abstractmethod
     def init(
         self, model: AbstractCableModel, cable: Cable
-    ) -> tuple[CableState, AbstractSample]:
+    ) -> tuple[CableState, _Sample]:
         """The state of the unloaded cable before the first sample, and the samples
         to scan (each field with a leading `samples` axis).
 
@@ -83,7 +94,7 @@ class AbstractDrive(eqx.Module):
         model: AbstractCableModel,
         cable: Cable,
         state: CableState,
-        sample: AbstractSample,
+        sample: _Sample,
         solve: Solve,
     ) -> tuple[CableState, StrainParts, Float[Array, ""]]:
         """Advance the cable by one sample: the new [`jaxcable.states.CableState`][],
