@@ -268,6 +268,7 @@ def test_a_residual_beside_an_unused_or_memoryless_covariate_asks_for_the_discov
 
     from jaxcable._diagnose import Verdict
     from jaxcable._diagnose.stages import (
+        Round,
         _discovery_may_beat as may_beat,
         _named_unless_beaten,
     )
@@ -276,10 +277,10 @@ def test_a_residual_beside_an_unused_or_memoryless_covariate_asks_for_the_discov
     named = Verdict("named", 0, (90.0,))
 
     def _discovery_may_beat(plan, base, found, decision, noise):
-        # The round's state as the stage reads it.
+        # The round's state as the stage reads it (only the fields it reads).
         round_base = S(problem=S(covariate=base.covariate))
         return may_beat(
-            S(plan=plan, base=round_base, found=found, decision=decision, noise=noise)
+            Round(round_base, plan=plan, found=found, decision=decision, noise=noise)
         )
 
     def found(rmse, covariate=None):
