@@ -1,5 +1,12 @@
 import importlib.metadata
 
+# Before anything else (nothing here computes): XLA reads its flags when JAX first
+# computes, and jaxcable's scans want their CPU loop kernels (`_cpu_loops`).
+from ._cpu_loops import enable_at_import as _enable_at_import
+
+
+_enable_at_import()
+
 from . import states as states
 from ._cable import (
     DEFAULT_BREAKING_LOAD_N as DEFAULT_BREAKING_LOAD_N,
@@ -11,7 +18,10 @@ from ._cache import (
     clear_compilation_cache as clear_compilation_cache,
     enable_compilation_cache as enable_compilation_cache,
 )
-from ._cpu_loops import enable_cpu_loop_kernels as enable_cpu_loop_kernels
+from ._cpu_loops import (
+    LoopKernelWarning as LoopKernelWarning,
+    enable_cpu_loop_kernels as enable_cpu_loop_kernels,
+)
 from ._diagnose import (
     Candidate as Candidate,
     CandidateSearch as CandidateSearch,

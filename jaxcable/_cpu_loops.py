@@ -7,17 +7,19 @@ about 100 of them (the model's step, Newton's method and its loops), so one cabl
 simulation is that dispatch, not arithmetic. XLA can instead compile a while loop
 whose buffers are small into one kernel (`xla_cpu_small_while_loop_byte_threshold`,
 1024 bytes by default): the whole scan of one cable then runs as compiled code,
-an order of magnitude faster for one cable, and it compiles faster too
-(`benchmarks/kernel.py --loop-kernels`; results in benchmarks/README.md).
+several times faster for one cable, and it compiles faster too
+(`benchmarks/peer_numba.py`, `benchmarks/kernel.py`; results in benchmarks/README.md).
 
 The option is an XLA flag (`XLA_FLAGS`), read once, when JAX starts its CPU backend
-(the first computation of a process); it cannot be scoped to one program. So the
-library never sets it by itself: the command line does, and a script or notebook can
-with [`jaxcable.enable_cpu_loop_kernels`][] before its first computation (importing
-jaxcable computes nothing).
+(the first computation of a process); it cannot be scoped to one program. So
+`import jaxcable` sets it (`enable_at_import`), which computes nothing, unless
+`$JAXCABLE_NO_LOOP_KERNELS` says no or `XLA_FLAGS` already sets the threshold; where
+JAX has already computed before jaxcable's import, it warns once that the option
+cannot take effect in this process. Every other XLA flag is kept as it was.
 """
 
 import os
+import warnings
 
 from ._checks import require_int
 
@@ -34,7 +36,7 @@ _EXTRA = "--xla_backend_extra_options="
 # small kernel over the cores, on 2 and on 16 cores (thresholds and timings:
 # benchmarks/README.md).
 DEFAULT_LOOP_KERNEL_BYTES = 1 << 24
-# The command line's switch to leave XLA's default.
+# The switch that leaves XLA's default (at import and on the command line).
 NO_LOOP_KERNELS_ENV = "JAXCABLE_NO_LOOP_KERNELS"
 
 
@@ -70,8 +72,10 @@ def enable_cpu_loop_kernels(byte_threshold: int = DEFAULT_LOOP_KERNEL_BYTES) -> 
 
     Adds `--xla_backend_extra_options=xla_cpu_small_while_loop_byte_threshold=N` to
     the `XLA_FLAGS` environment variable, which JAX reads when it starts its CPU
-    backend: call it before the first computation (importing jaxcable computes
-    nothing). A threshold already in `XLA_FLAGS` is kept. Results are the same
+    backend: call it before the first computation. `import jaxcable` already calls
+    it with the default threshold (unless `$JAXCABLE_NO_LOOP_KERNELS` is set); a
+    call of yours replaces that default, while a threshold that `XLA_FLAGS` set
+    before the import is kept. Results are the same
     computation, compiled differently: in float64 within rounding of XLA's default
     (tested), on other backends nothing changes.
 
@@ -97,9 +101,17 @@ def enable_cpu_loop_kernels(byte_threshold: int = DEFAULT_LOOP_KERNEL_BYTES) -> 
             "enable_cpu_loop_kernels: JAX's backend has already started, so XLA_FLAGS "
             "are read already; call it before the first computation of the process."
         )
-    flags = with_loop_kernel_option(os.environ.get("XLA_FLAGS", ""), byte_threshold)
+    flags = os.environ.get("XLA_FLAGS", "")
+    if _import_flags is not None and flags == _import_flags[1]:
+        # The import's default, not a choice of the user's: replaced.
+        flags = _import_flags[0]
+    flags = with_loop_kernel_option(flags, byte_threshold)
     os.environ["XLA_FLAGS"] = flags
     return flags
+
+
+# `XLA_FLAGS` before and after `enable_at_import` set them, where it did.
+_import_flags: tuple[str, str] | None = None
 
 
 def loop_kernels_disabled() -> bool:
@@ -107,11 +119,40 @@ def loop_kernels_disabled() -> bool:
     return os.environ.get(NO_LOOP_KERNELS_ENV, "") not in ("", "0")
 
 
-def try_enable_cpu_loop_kernels() -> bool:
-    """[`enable_cpu_loop_kernels`][] with its default, unless `$JAXCABLE_NO_LOOP_KERNELS`
-    says no or it can no longer take effect (the command line's start); whether it
-    did."""
-    if loop_kernels_disabled() or _backend_started():
+class LoopKernelWarning(UserWarning):
+    """`import jaxcable` came after JAX's first computation on the CPU, so the CPU loop
+    kernels it enables (see [`jaxcable.enable_cpu_loop_kernels`][]) cannot take effect
+    in this process: the simulations are correct, several times slower for one
+    cable. Import jaxcable before computing, or set `$JAXCABLE_NO_LOOP_KERNELS=1` to
+    keep XLA's default without the warning."""
+
+
+def _started_on_cpu() -> bool:
+    # Only asked once the backends have started, so this starts nothing.
+    import jax
+
+    return jax.default_backend() == "cpu"
+
+
+def enable_at_import() -> bool:
+    """What `import jaxcable` does: [`enable_cpu_loop_kernels`][] with its default,
+    unless `$JAXCABLE_NO_LOOP_KERNELS` is set or `XLA_FLAGS` already sets the
+    threshold; a `LoopKernelWarning` where JAX's CPU backend has already started.
+    Whether the option was set now."""
+    if loop_kernels_disabled() or _OPTION in os.environ.get("XLA_FLAGS", ""):
         return False
-    enable_cpu_loop_kernels()
+    if _backend_started():
+        if _started_on_cpu():
+            warnings.warn(
+                "jaxcable was imported after JAX's first computation, so its CPU loop "
+                "kernels (XLA_FLAGS, read when JAX starts) cannot take effect in this "
+                "process: the simulations run several times slower. Import jaxcable "
+                f"before computing, or set {NO_LOOP_KERNELS_ENV}=1 to silence this.",
+                LoopKernelWarning,
+                stacklevel=2,
+            )
+        return False
+    global _import_flags
+    before = os.environ.get("XLA_FLAGS", "")
+    _import_flags = (before, enable_cpu_loop_kernels())
     return True

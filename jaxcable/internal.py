@@ -35,7 +35,6 @@ from ._cpu_loops import (
     DEFAULT_LOOP_KERNEL_BYTES as DEFAULT_LOOP_KERNEL_BYTES,
     NO_LOOP_KERNELS_ENV as NO_LOOP_KERNELS_ENV,
     loop_kernels_disabled as loop_kernels_disabled,
-    try_enable_cpu_loop_kernels as try_enable_cpu_loop_kernels,
     with_loop_kernel_option as with_loop_kernel_option,
 )
 

@@ -83,16 +83,16 @@ if TEST_CACHE is not None:
     # Every program: the suite's many small kernels add up.
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
 
-import jaxcable  # noqa: E402
+# The scans' loops compiled as single CPU kernels, as `import jaxcable` sets them up
+# (before the first computation; the workers, notebooks' kernels and subprocesses
+# inherit XLA_FLAGS). tests/test_cpu_loops.py checks that XLA's default gives the
+# same results. JAXCABLE_TEST_LOOP_KERNELS=off keeps XLA's default
+# (`make test-xla-default`), through jaxcable's own switch.
+if os.environ.get("JAXCABLE_TEST_LOOP_KERNELS", "on") == "off":
+    os.environ["JAXCABLE_NO_LOOP_KERNELS"] = "1"
 
+import jaxcable  # noqa: E402, F401  (sets up the loop kernels before any computation)
 
-# The scans' loops compiled as single CPU kernels, as the command line compiles them
-# (`jaxcable.enable_cpu_loop_kernels`: before the first computation; the workers,
-# notebooks' kernels and subprocesses inherit XLA_FLAGS). tests/test_cpu_loops.py
-# checks that XLA's default gives the same results. JAXCABLE_TEST_LOOP_KERNELS=off
-# keeps XLA's default (`make test-xla-default`).
-if os.environ.get("JAXCABLE_TEST_LOOP_KERNELS", "on") != "off":
-    jaxcable.enable_cpu_loop_kernels()
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 SHARED = pathlib.Path(os.environ.get("JAXCABLE_SHARED", ROOT.parent / "shared"))

@@ -15,7 +15,6 @@ from jaxcable.internal import (
     DEFAULT_LOOP_KERNEL_BYTES,
     NO_LOOP_KERNELS_ENV,
     loop_kernels_disabled,
-    try_enable_cpu_loop_kernels,
     with_loop_kernel_option,
 )
 
@@ -64,8 +63,6 @@ def test_after_the_first_computation_it_says_so():
     with pytest.raises(RuntimeError, match="before the first computation"):
         jc.enable_cpu_loop_kernels()
     assert os.environ.get("XLA_FLAGS") == before
-    # The command line's form does nothing there instead of failing.
-    assert try_enable_cpu_loop_kernels() is False
 
 
 def test_the_command_line_switch(monkeypatch):
@@ -85,9 +82,11 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np
 import jaxcable as jc
 from jax._src import xla_bridge
+import os
 started_by_import = xla_bridge.backends_are_initialized()
+flags = os.environ.get("XLA_FLAGS")
 from tests.test_cpu_loops import drives
-print(json.dumps(dict(started_by_import=started_by_import, **drives())))
+print(json.dumps(dict(started_by_import=started_by_import, flags=flags, **drives())))
 """
 
 
@@ -116,11 +115,23 @@ def drives() -> dict:
     )
 
 
-@pytest.fixture(scope="module")
-def default():
-    env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
+def _fresh_env(**extra: str) -> dict[str, str]:
+    """This process's environment without XLA_FLAGS and jaxcable's switch, with the
+    project on the path, plus `extra`."""
+    env = {
+        k: v
+        for k, v in os.environ.items()
+        if k not in ("XLA_FLAGS", NO_LOOP_KERNELS_ENV)
+    }
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     env["PYTHONPATH"] = os.pathsep.join(filter(None, [root, env.get("PYTHONPATH")]))
+    return {**env, **extra}
+
+
+@pytest.fixture(scope="module")
+def default():
+    # XLA's default: no XLA_FLAGS, and jaxcable's import told to leave them.
+    env = _fresh_env(**{NO_LOOP_KERNELS_ENV: "1"})
     done = subprocess.run(
         [sys.executable, "-c", _SCRIPT],
         env=env,
@@ -135,6 +146,8 @@ def default():
 def test_importing_jaxcable_computes_nothing(default):
     # Otherwise XLA_FLAGS set after `import jaxcable` would be ignored.
     assert default["started_by_import"] is False
+    # ... and with the switch set, it leaves XLA's flags alone.
+    assert default["flags"] is None
 
 
 def test_the_suite_runs_with_the_default_threshold():
@@ -156,3 +169,91 @@ def test_loop_kernels_give_xla_defaults_results(default):
         assert a.shape == b.shape and np.all(np.isfinite(b))
         np.testing.assert_allclose(b, a, rtol=0, atol=1e-12 * np.max(np.abs(a)))
     np.testing.assert_allclose(loops["grad"], default["grad"], rtol=1e-10)
+
+
+# What `import jaxcable` does to XLA_FLAGS in a fresh interpreter: the flags after the
+# import, whether the backend then runs (a computation), and the warnings raised.
+_IMPORT = r"""
+import json, os, sys, warnings
+warnings.simplefilter("always")
+with warnings.catch_warnings(record=True) as caught:
+    if sys.argv[1] == "late":
+        import jax.numpy as jnp
+        jnp.zeros(()).block_until_ready()
+    import jaxcable as jc
+    import jax.numpy as jnp
+    float(jnp.ones(3).sum())
+print(json.dumps(dict(
+    flags=os.environ.get("XLA_FLAGS"),
+    warnings=[type(w.message).__name__ for w in caught],
+    late=[str(w.message) for w in caught if issubclass(w.category, jc.LoopKernelWarning)],
+)))
+"""
+
+
+def _import_in_fresh_process(case: str = "early", **env: str) -> dict:
+    done = subprocess.run(
+        [sys.executable, "-c", _IMPORT, case],
+        env=_fresh_env(**env),
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert done.returncode == 0, done.stderr[-2000:]
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+_OTHERS = "--xla_cpu_use_fusion_emitters=false --xla_backend_extra_options=xla_cpu_disable_loop_unrolling"
+
+
+@pytest.mark.parametrize(
+    "env, expected",
+    [
+        # A user's first import: the default threshold, and nothing else.
+        ({}, f"--xla_backend_extra_options={_OPTION}=16777216"),
+        # Other flags, and other extra options, are kept; the threshold merged in.
+        (
+            {"XLA_FLAGS": _OTHERS},
+            "--xla_cpu_use_fusion_emitters=false --xla_backend_extra_options="
+            f"xla_cpu_disable_loop_unrolling,{_OPTION}=16777216",
+        ),
+        # A threshold of the user's own is theirs.
+        (
+            {"XLA_FLAGS": f"--xla_backend_extra_options={_OPTION}=4096"},
+            f"--xla_backend_extra_options={_OPTION}=4096",
+        ),
+        # The switch: XLA's flags untouched.
+        ({NO_LOOP_KERNELS_ENV: "1", "XLA_FLAGS": _OTHERS}, _OTHERS),
+        ({NO_LOOP_KERNELS_ENV: "1"}, None),
+    ],
+)
+def test_importing_jaxcable_enables_the_loop_kernels(env, expected):
+    out = _import_in_fresh_process(**env)
+    assert out["flags"] == expected
+    assert out["warnings"] == []
+
+
+def test_importing_jaxcable_too_late_warns_once():
+    out = _import_in_fresh_process("late")
+    assert out["flags"] is None
+    assert len(out["late"]) == 1 and "first computation" in out["late"][0]
+    # With the switch, no warning.
+    assert _import_in_fresh_process("late", **{NO_LOOP_KERNELS_ENV: "1"})["late"] == []
+
+
+def test_a_call_of_the_users_replaces_the_imports_default(monkeypatch):
+    # This process imported jaxcable before computing (tests/conftest.py), but its
+    # backend runs now: the replacement is checked on the flags alone.
+    import jaxcable._cpu_loops as loops
+
+    monkeypatch.setattr(loops, "_backend_started", lambda: False)
+    monkeypatch.setattr(loops, "_import_flags", ("--a", "--a --x=1"))
+    monkeypatch.setenv("XLA_FLAGS", "--a --x=1")
+    assert jc.enable_cpu_loop_kernels(2048) == (
+        f"--a --xla_backend_extra_options={_OPTION}=2048"
+    )
+    # Flags that are no longer the import's are the user's: their threshold kept.
+    monkeypatch.setenv("XLA_FLAGS", f"--b --xla_backend_extra_options={_OPTION}=7")
+    assert jc.enable_cpu_loop_kernels(2048) == (
+        f"--b --xla_backend_extra_options={_OPTION}=7"
+    )

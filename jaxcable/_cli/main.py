@@ -18,7 +18,6 @@ from collections.abc import Sequence
 import jax
 
 from .._cache import enable_compilation_cache
-from .._cpu_loops import try_enable_cpu_loop_kernels
 from .common import PROG, CliError, one_line
 from .parser import build_parser
 
@@ -72,11 +71,10 @@ def entry() -> None:
     `jaxcable fit`). Only here, not in `main`, which a test or a script may call
     many times in one process.
 
-    Before anything is computed it also lets XLA compile the scans' loops as single
-    CPU kernels ([`jaxcable.enable_cpu_loop_kernels`][]; `$JAXCABLE_NO_LOOP_KERNELS`
-    leaves XLA's default).
+    XLA compiles the scans' loops as single CPU kernels, as `import jaxcable` set up
+    ([`jaxcable.enable_cpu_loop_kernels`][]; `$JAXCABLE_NO_LOOP_KERNELS` leaves
+    XLA's default).
     """
-    try_enable_cpu_loop_kernels()
     gc.freeze()
     raise SystemExit(main())
 
