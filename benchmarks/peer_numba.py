@@ -1,9 +1,10 @@
 """Peer baseline: the rate-driven simulation of `jaxcable.IntegratedModel` written as
 the plain Numba loop a scientist would write, checked against jaxcable and timed
-against it in one run (float64 and float32, 1 and 1024 cables).
+against it in one run (Park's 10-cycle test and one load-unload ramp; float64 and
+float32; one cable with and without a batch axis, and batches).
 
-    python benchmarks/peer_numba.py [--samples 2000] [--batches 1,1024] [--repeats 9]
-        [--threads N] [--json-out FILE]
+    python benchmarks/peer_numba.py [--protocols park10,ramp] [--samples 2000]
+        [--batches 1,1024] [--repeats 9] [--threads N] [--json-out FILE]
 
 Needs numba, a benchmark-only dependency: `pip install -e .[bench]`.
 
@@ -16,16 +17,28 @@ a bracket search and bisection where Newton fails), `prange` over the cables
 which on a busy machine can cost milliseconds); float64 and float32 are two
 specialisations of the same code.
 
-First the agreement with jaxcable in float64 (x64 enabled in this process): the
-largest |difference of elongation| over every sample of a cable, divided by that
-cable's peak elongation, largest over the cables of the largest batch. Then the
-timings: jaxcable at the library's defaults (a plain `jax.jit` of a `jax.vmap` of
-`jaxcable.simulate_rate_test(model, cable, protocol, throw=False)`, no
-`enable_cpu_loop_kernels`, no XLA_FLAGS) runs in a fresh subprocess per dtype (float32
-with x64 disabled, the library's default dtype; float64 with x64 enabled); Numba runs
-in this process after it. Each time is the median of `--repeats` calls after a
-warm-up call; the first call (compilation included) is reported apart. Prints one
-JSON object and a table.
+The protocols: `park10`, Park's 10 cycles to 100 N as a user runs them
+(`Protocol.cycles(100.0, 10, samples_per_ramp=100)`, 2001 samples), one cable of
+0.3 m at 3 mm/min; `ramp`, one load-unload cycle to 100 N in `--samples` samples. A
+batch of several cables spreads their lengths over 0.1-0.5 m and their speeds over
+3-10 mm/min, so that the lanes differ.
+
+First the agreement with jaxcable in float64 (x64 enabled in this process), for each
+protocol: the largest |difference of elongation| over every sample of a cable,
+divided by that cable's peak elongation, largest over the cables of the largest
+batch. Then the timings: jaxcable at the library's defaults runs in a fresh
+subprocess per dtype (float32 with x64 disabled, the library's default dtype; float64
+with x64 enabled) whose environment has no `XLA_FLAGS` and no
+`JAXCABLE_NO_LOOP_KERNELS`, so that it sees what a fresh user process sees, flags
+jaxcable sets at import included (reported as `worker_xla_flags`). A batch of one is
+timed twice: without a batch axis, `jax.jit` of `jaxcable.simulate_rate_test(model,
+cable, protocol, method=Simulation(throw=False))` on an unbatched `Cable` returning
+its `Trajectory` (a user's first call), and as a `jax.vmap` over a batch of one
+returning the elongation and result; larger batches are vmapped. Numba runs in this
+process after each worker. Each time is the median of `--repeats` calls after a
+warm-up call; the first call (compilation included) is reported apart. Each row's
+`ratio` is to Numba in its dtype, `ratio_to_numba_float64` to Numba in float64 on the
+same protocol and batch. Prints one JSON object and a table.
 """
 
 import argparse
@@ -498,48 +511,82 @@ def simulate_rate_test_numba(
 
 
 # ----------------------------------------------------------------------------------
-# The problem of benchmarks/kernel.py, and jaxcable on it.
+# The problems, and jaxcable on them.
+
+# The timed protocols: Park's 10-cycle test, and one load-unload ramp.
+PROTOCOLS = ("park10", "ramp")
 
 
-def problem(samples: int, batch: int):
-    """The protocol arrays (one load-unload cycle to 100 N, `samples` samples), the
-    cables' lengths (m) and speeds (m/s), and the default parameters (float64)."""
+def problem(samples: int, batch: int, protocol: str = "ramp"):
+    """The protocol, its arrays, the cables' lengths (m) and speeds (m/s), and the
+    default parameters (float64) of a rate-driven test of `batch` cables.
 
-    protocol = jc.Protocol.cycles(100.0, 1, samples_per_ramp=samples // 2, start=False)
+    **Arguments:**
+
+    - `samples`: the samples of "ramp" (unused by "park10").
+    - `batch`: the number of cables.
+    - `protocol`: "ramp", one load-unload cycle to 100 N in `samples` samples; or
+        "park10", Park's 10 cycles to 100 N, 100 samples a ramp from a sample at
+        0 N (2001 samples), on one cable of 0.3 m at 3 mm/min where `batch` is 1.
+        Otherwise the lengths spread over 0.1-0.5 m, the speeds over 3-10 mm/min.
+
+    **Returns:**
+
+    `(protocol, arrays, lengths, speeds, params)`.
+    """
+    if protocol == "ramp":
+        proto = jc.Protocol.cycles(100.0, 1, samples_per_ramp=samples // 2, start=False)
+    elif protocol == "park10":
+        proto = jc.Protocol.cycles(100.0, 10, samples_per_ramp=100)
+    else:
+        raise ValueError(f"`protocol` must be one of {PROTOCOLS}, got {protocol!r}.")
     arrays = {
-        k: np.asarray(getattr(protocol, k))
+        k: np.asarray(getattr(proto, k))
         for k in ("force", "direction", "duration", "mask")
     }
     # Read off the class, not an instance: an instance's fields follow JAX's dtype.
     defaults = jc.IntegratedModel.__dataclass_fields__
     params = np.array([float(defaults[k].default) for k in PARAMETERS])
-    lengths = np.linspace(0.1, 0.5, batch)
-    speeds = np.linspace(3e-3, 10e-3, batch) / 60
-    return protocol, arrays, lengths, speeds, params
+    if protocol == "park10" and batch == 1:
+        lengths, speeds = np.array([0.3]), np.array([3e-3 / 60])
+    else:
+        lengths = np.linspace(0.1, 0.5, batch)
+        speeds = np.linspace(3e-3, 10e-3, batch) / 60
+    return proto, arrays, lengths, speeds, params
 
 
-def jaxcable_forward(protocol):
-    """The jitted jaxcable simulation of a batch: (model, cable) -> (elongation,
-    result), at the library's defaults."""
+def jaxcable_forward(protocol, batch_axis: bool = True):
+    """The jitted jaxcable simulation at the library's defaults: with `batch_axis`,
+    (model, batched cable) -> (elongation, result) through `jax.vmap`; without,
+    (model, cable) -> the `Trajectory`, a user's plain call."""
     import jax
 
-    def forward(model, cable):
-        simulate = lambda c: jc.simulate_rate_test(
-            model, c, protocol, method=jc.Simulation(throw=False)
+    method = jc.Simulation(throw=False)
+    if not batch_axis:
+        return jax.jit(
+            lambda model, cable: jc.simulate_rate_test(
+                model, cable, protocol, method=method
+            )
         )
+
+    def forward(model, cable):
+        simulate = lambda c: jc.simulate_rate_test(model, c, protocol, method=method)
         traj = jax.vmap(simulate)(cable)
         return traj.elongation, traj.result
 
     return jax.jit(forward)
 
 
-def jaxcable_inputs(params, lengths, speeds):
-    """The model (parameters `params`) and the batched Cable, in JAX's default dtype;
-    the other Cable fields at their defaults."""
+def jaxcable_inputs(params, lengths, speeds, batch_axis: bool = True):
+    """The model (parameters `params`) and the Cable, in JAX's default dtype, the
+    other Cable fields at their defaults: batched over `lengths` with
+    `batch_axis`, else the first cable without a batch axis."""
     import jax
     import jax.numpy as jnp
 
     model = jc.IntegratedModel(**dict(zip(PARAMETERS, params)))
+    if not batch_axis:
+        return model, jc.Cable(length=float(lengths[0]), speed=float(speeds[0]))
     cable = jc.Cable(length=jnp.asarray(lengths), speed=jnp.asarray(speeds))
     batch = len(lengths)
     cable = jax.tree_util.tree_map(lambda x: jnp.broadcast_to(x, (batch,)), cable)
@@ -554,16 +601,18 @@ def agreement(reference, elongation):
     return float(np.max(diff / np.max(np.abs(ref), axis=-1)))
 
 
-def check_agreement(samples: int, batch: int, parallel: bool | None = None) -> dict:
-    """Numba against jaxcable in float64 (needs x64 enabled), on `batch` cables x
-    `samples` samples: {"agreement", "successful_jaxcable", "successful_numba"}
-    (`parallel`: as `simulate_rate_test_numba`)."""
+def check_agreement(
+    samples: int, batch: int, parallel: bool | None = None, protocol: str = "ramp"
+) -> dict:
+    """Numba against jaxcable in float64 (needs x64 enabled), on `batch` cables of
+    `problem(samples, batch, protocol)`: {"agreement", "successful_jaxcable",
+    "successful_numba"} (`parallel`: as `simulate_rate_test_numba`)."""
     import jax
 
     if not jax.config.jax_enable_x64:
         raise RuntimeError("check_agreement needs jax_enable_x64.")
-    protocol, arrays, lengths, speeds, params = problem(samples, batch)
-    elongation, result = jaxcable_forward(protocol)(
+    proto, arrays, lengths, speeds, params = problem(samples, batch, protocol)
+    elongation, result = jaxcable_forward(proto)(
         *jaxcable_inputs(params, lengths, speeds)
     )
     out = simulate_rate_test_numba(params, lengths, speeds, arrays, parallel=parallel)
@@ -583,20 +632,42 @@ def _median(fn, repeats):
     return sorted(times)[len(times) // 2]
 
 
+def _cases(args):
+    """(protocol, batch, batch_axis) of every timed case: a batch of one both
+    without a batch axis and vmapped, a larger batch vmapped."""
+    return [
+        (protocol, batch, axis)
+        for protocol in args.protocol_list
+        for batch in args.batch_list
+        for axis in ((False, True) if batch == 1 else (True,))
+    ]
+
+
+def _case_name(protocol, batch, axis, samples):
+    return f"{protocol}:{batch}x{samples}" + (" vmap" if axis else "")
+
+
+def _dump_path(dump, dtype, protocol, batch, axis):
+    return os.path.join(dump, f"{dtype}_{protocol}_{batch}_{int(axis)}.npy")
+
+
 def _jax_worker(args):
     """Time jaxcable in this (fresh) process in one dtype; print the rows as JSON."""
     import jax
 
+    # What a fresh user process runs with once jaxcable is imported.
+    xla_flags = os.environ.get("XLA_FLAGS")
     if args.worker == "float64":
         jax.config.update("jax_enable_x64", True)
     rows = []
-    for batch in args.batch_list:
-        protocol, _, lengths, speeds, params = problem(args.samples, batch)
-        forward = jaxcable_forward(protocol)
-        model, cable = jaxcable_inputs(params, lengths, speeds)
+    for protocol, batch, axis in _cases(args):
+        proto, arrays, lengths, speeds, params = problem(args.samples, batch, protocol)
+        forward = jaxcable_forward(proto, axis)
+        model, cable = jaxcable_inputs(params, lengths, speeds, axis)
         t0 = time.perf_counter()
-        elongation, _ = jax.block_until_ready(forward(model, cable))
+        out = jax.block_until_ready(forward(model, cable))
         first = time.perf_counter() - t0
+        elongation = out[0] if axis else out.elongation
         if elongation.dtype != np.dtype(args.worker):
             raise RuntimeError(
                 f"jaxcable ran in {elongation.dtype}, not {args.worker}."
@@ -605,24 +676,27 @@ def _jax_worker(args):
         run()
         rows.append(
             dict(
+                protocol=protocol,
                 batch=batch,
+                batch_axis=axis,
+                samples=int(arrays["force"].shape[0]),
                 jaxcable_s=_median(run, args.repeats),
                 jaxcable_first_call_s=first,
             )
         )
         np.save(
-            os.path.join(args.dump, f"{args.worker}_{batch}.npy"),
-            np.asarray(elongation),
+            _dump_path(args.dump, args.worker, protocol, batch, axis),
+            np.asarray(elongation).reshape(batch, -1),
         )
-    print(
-        json.dumps(dict(rows=rows, jax=jax.__version__, backend=jax.default_backend()))
-    )
+    info = dict(jax=jax.__version__, backend=jax.default_backend())
+    print(json.dumps(dict(rows=rows, xla_flags=xla_flags, **info)))
 
 
 def _run_worker(args, dtype, dump):
-    env = {
-        k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", "JAX_ENABLE_X64")
-    }
+    # The worker sees the environment a fresh user process sees: no XLA flags, and
+    # jaxcable's own choice of them at import.
+    stripped = ("XLA_FLAGS", "JAX_ENABLE_X64", "JAXCABLE_NO_LOOP_KERNELS")
+    env = {k: v for k, v in os.environ.items() if k not in stripped}
     cmd = [
         sys.executable,
         os.path.abspath(__file__),
@@ -634,6 +708,8 @@ def _run_worker(args, dtype, dump):
         str(args.samples),
         "--batches",
         args.batches,
+        "--protocols",
+        args.protocols,
         "--repeats",
         str(args.repeats),
     ]
@@ -645,8 +721,9 @@ def _run_worker(args, dtype, dump):
 
 def _parse():
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--samples", type=int, default=2000)
+    p.add_argument("--samples", type=int, default=2000, help="samples of 'ramp'")
     p.add_argument("--batches", default="1,1024")
+    p.add_argument("--protocols", default=",".join(PROTOCOLS))
     p.add_argument("--repeats", type=int, default=9)
     p.add_argument(
         "--threads", type=int, default=None, help="Numba threads (default: all cores)"
@@ -656,11 +733,146 @@ def _parse():
     p.add_argument("--dump", help=argparse.SUPPRESS)
     args = p.parse_args()
     args.batch_list = [int(b) for b in args.batches.split(",")]
+    args.protocol_list = [s.strip() for s in args.protocols.split(",") if s.strip()]
     if args.samples < 2 or args.repeats < 1 or min(args.batch_list) < 1:
         p.error("--samples must be >= 2, --repeats and every batch >= 1")
+    if not args.protocol_list or set(args.protocol_list) - set(PROTOCOLS):
+        p.error(f"--protocols must be a comma-separated subset of {PROTOCOLS}")
     if args.threads is not None and args.threads < 1:
         p.error("--threads must be >= 1")
     return args
+
+
+def _compile_numba(samples):
+    """Seconds of the first calls of the serial kernel (one cable) and of the
+    parallel one, by dtype: the compilation of the Numba kernels."""
+    _, arrays, lengths, speeds, params = problem(samples, 1)
+    numba_compile = {}
+    for dtype in ("float64", "float32"):
+        t0 = time.perf_counter()
+        for parallel in (False, True):
+            simulate_rate_test_numba(
+                params, lengths, speeds, arrays, dtype=dtype, parallel=parallel
+            )
+        numba_compile[dtype] = time.perf_counter() - t0
+    return numba_compile
+
+
+def _check_all(args):
+    """The float64 agreement of every protocol on the largest batch: the list of
+    checks, each with its protocol, case and verdict."""
+    big = max(args.batch_list)
+    checks = []
+    for protocol in args.protocol_list:
+        check = check_agreement(args.samples, big, protocol=protocol)
+        samples = problem(args.samples, big, protocol)[1]["force"].shape[0]
+        ok = (
+            check["agreement"] <= AGREEMENT
+            and check["successful_numba"] == check["successful_jaxcable"] == big
+        )
+        checks.append(
+            dict(
+                check,
+                protocol=protocol,
+                case=_case_name(protocol, big, True, samples),
+                dtype="float64",
+                ok=ok,
+            )
+        )
+        print(
+            f"agreement (float64, {checks[-1]['case']}): {check['agreement']:.2e} of "
+            f"the peak ({'ok' if ok else f'FAILED: more than {AGREEMENT:g}'})",
+            file=sys.stderr,
+        )
+    return checks
+
+
+class _NumbaTimes:
+    """The Numba loop's median time and its last simulation per (dtype, protocol,
+    batch), each timed once; one cable runs the serial kernel."""
+
+    def __init__(self, args):
+        self.args, self.cache = args, {}
+
+    def __call__(self, dtype, protocol, batch):
+        key = (dtype, protocol, batch)
+        if key not in self.cache:
+            _, arrays, lengths, speeds, params = problem(
+                self.args.samples, batch, protocol
+            )
+            call = lambda: simulate_rate_test_numba(
+                params, lengths, speeds, arrays, dtype=dtype
+            )
+            sim = call()
+            self.cache[key] = (_median(call, self.args.repeats), sim)
+        return self.cache[key]
+
+
+def _row(w, dtype, dump, numba_times, numba_compile):
+    """One row of the table from a worker's row `w`."""
+    protocol, batch, axis = w["protocol"], w["batch"], w["batch_axis"]
+    numba_s, sim = numba_times(dtype, protocol, batch)
+    numba_f64_s = numba_times("float64", protocol, batch)[0]
+    ref = np.load(_dump_path(dump, dtype, protocol, batch, axis))
+    return dict(
+        case=_case_name(protocol, batch, axis, w["samples"]),
+        protocol=protocol,
+        batch=batch,
+        batch_axis=axis,
+        samples=w["samples"],
+        dtype=dtype,
+        jaxcable_s=w["jaxcable_s"],
+        numba_s=numba_s,
+        ratio=w["jaxcable_s"] / numba_s,
+        ratio_to_numba_float64=w["jaxcable_s"] / numba_f64_s,
+        jaxcable_first_call_s=w["jaxcable_first_call_s"],
+        numba_compile_s=numba_compile[dtype],
+        agreement=agreement(ref, sim["elongation"]),
+        numba_successful=int(np.sum(sim["status"] == 0)),
+    )
+
+
+def _timed_rows(args, numba_compile):
+    """jaxcable (a fresh worker per dtype, float64 first), then Numba in this
+    process: the rows and what the workers report of their JAX."""
+    rows, info = [], {}
+    numba_times = _NumbaTimes(args)
+    with tempfile.TemporaryDirectory() as dump:
+        for dtype in ("float64", "float32"):
+            worker = _run_worker(args, dtype, dump)
+            info = dict(
+                jax=worker["jax"],
+                backend=worker["backend"],
+                worker_xla_flags=worker["xla_flags"],
+            )
+            for w in worker["rows"]:
+                rows.append(_row(w, dtype, dump, numba_times, numba_compile))
+    return rows, info
+
+
+def _print_table(out):
+    print(
+        f"\nagreement (float64, largest batch, of each cable's peak): "
+        f"{out['agreement']:.2e}"
+    )
+    load = out["load"]
+    print(f"load average (1, 5, 15 min) at start {load['start']}, at end {load['end']}")
+    print(
+        f"worker XLA_FLAGS after import jaxcable: {out['machine']['worker_xla_flags']}"
+    )
+    print(
+        f"{'protocol':>8} {'batch':>6} {'axis':>5} {'dtype':>8} {'jaxcable [s]':>13} "
+        f"{'numba [s]':>11} {'ratio':>8} {'/numba64':>9} {'jax 1st [s]':>12} "
+        f"{'numba compile [s]':>18} {'agreement':>10}"
+    )
+    for r in out["rows"]:
+        print(
+            f"{r['protocol']:>8} {r['batch']:>6} {'vmap' if r['batch_axis'] else '-':>5} "
+            f"{r['dtype']:>8} {r['jaxcable_s']:>13.5f} {r['numba_s']:>11.5f} "
+            f"{r['ratio']:>8.2f} {r['ratio_to_numba_float64']:>9.2f} "
+            f"{r['jaxcable_first_call_s']:>12.2f} {r['numba_compile_s']:>18.2f} "
+            f"{r['agreement']:>10.1e}"
+        )
 
 
 def main():
@@ -675,63 +887,14 @@ def main():
     import jax
 
     jax.config.update("jax_enable_x64", True)  # this process: the float64 check only
-
-    # Compilation of the Numba kernels: the first calls of the serial kernel (one
-    # cable) and of the parallel one, in each dtype.
-    _, arrays, lengths, speeds, params = problem(args.samples, 1)
-    numba_compile = {}
-    for dtype in ("float64", "float32"):
-        t0 = time.perf_counter()
-        for parallel in (False, True):
-            simulate_rate_test_numba(
-                params, lengths, speeds, arrays, dtype=dtype, parallel=parallel
-            )
-        numba_compile[dtype] = time.perf_counter() - t0
-
-    big = max(args.batch_list)
-    check = check_agreement(args.samples, big)
-    agreed = (
-        check["agreement"] <= AGREEMENT
-        and check["successful_numba"] == check["successful_jaxcable"] == big
-    )
-    print(
-        f"agreement (float64, {big} x {args.samples}): {check['agreement']:.2e} of "
-        f"the peak ({'ok' if agreed else f'FAILED: more than {AGREEMENT:g}'})",
-        file=sys.stderr,
-    )
-
-    rows, jax_info = [], {}
-    with tempfile.TemporaryDirectory() as dump:
-        for dtype in ("float64", "float32"):
-            worker = _run_worker(args, dtype, dump)
-            jax_info = dict(jax=worker["jax"], backend=worker["backend"])
-            for w in worker["rows"]:
-                batch = w["batch"]
-                _, arrays, lengths, speeds, params = problem(args.samples, batch)
-                call = lambda: simulate_rate_test_numba(
-                    params, lengths, speeds, arrays, dtype=dtype
-                )
-                sim = call()
-                numba_s = _median(call, args.repeats)
-                ref = np.load(os.path.join(dump, f"{dtype}_{batch}.npy"))
-                rows.append(
-                    dict(
-                        case=f"{batch}x{args.samples}",
-                        dtype=dtype,
-                        jaxcable_s=w["jaxcable_s"],
-                        numba_s=numba_s,
-                        ratio=w["jaxcable_s"] / numba_s,
-                        jaxcable_first_call_s=w["jaxcable_first_call_s"],
-                        numba_compile_s=numba_compile[dtype],
-                        agreement=agreement(ref, sim["elongation"]),
-                        numba_successful=int(np.sum(sim["status"] == 0)),
-                    )
-                )
+    numba_compile = _compile_numba(args.samples)
+    checks = _check_all(args)
+    worst = max(checks, key=lambda c: c["agreement"])
+    rows, jax_info = _timed_rows(args, numba_compile)
     out = dict(
-        agreement=check["agreement"],
-        agreement_check=dict(
-            check, case=f"{big}x{args.samples}", dtype="float64", ok=agreed
-        ),
+        agreement=worst["agreement"],
+        agreement_check=worst,
+        agreement_checks=checks,
         rows=rows,
         machine=dict(
             platform=platform.platform(),
@@ -747,27 +910,12 @@ def main():
         load=dict(start=load_start, end=list(os.getloadavg())),
     )
     print(json.dumps(out, indent=1))
-    print(
-        f"\nagreement (float64, {big} x {args.samples}, of each cable's peak): {out['agreement']:.2e}"
-    )
-    print(
-        f"load average (1, 5, 15 min) at start {load_start}, at end {out['load']['end']}"
-    )
-    print(
-        f"{'case':>10} {'dtype':>8} {'jaxcable [s]':>13} {'numba [s]':>11} {'ratio':>8} "
-        f"{'jax 1st [s]':>12} {'numba compile [s]':>18} {'agreement':>10}"
-    )
-    for r in rows:
-        print(
-            f"{r['case']:>10} {r['dtype']:>8} {r['jaxcable_s']:>13.5f} {r['numba_s']:>11.5f} "
-            f"{r['ratio']:>8.2f} {r['jaxcable_first_call_s']:>12.2f} "
-            f"{r['numba_compile_s']:>18.2f} {r['agreement']:>10.1e}"
-        )
+    _print_table(out)
     if args.json_out:
         with open(args.json_out, "w") as f:
             json.dump(out, f, indent=1)
-    if not agreed:
-        sys.exit(f"Numba and jaxcable disagree: {check}")
+    if not all(c["ok"] for c in checks):
+        sys.exit(f"Numba and jaxcable disagree: {worst}")
 
 
 if __name__ == "__main__":
