@@ -4,11 +4,14 @@ amortised cost of one closed-loop sample of the 8-cable robot example inside its
 `lax.scan` (tension distribution + controller + real cables + forward kinematics).
 
     python benchmarks/controller.py [--cables 8] [--repeats 2000] [--x64] [--sync]
-        [--scan-hours 0.5] [--json-out FILE]
+        [--scan-hours 0.5] [--xla-default] [--json-out FILE]
 
 Timings: `jax.jit` of the step with the state, time and forces as arguments, warm-up
 calls, then the median (and 10th/90th percentiles) over `--repeats` calls, each ended
-by `jax.block_until_ready`. Prints one JSON object and a table.
+by `jax.block_until_ready`. The scans run with the CPU loop kernels that `import
+jaxcable` turns on; `--xla-default` keeps XLA's own CPU loops
+(`JAXCABLE_NO_LOOP_KERNELS=1`), and the JSON's `loop_kernels` says which ran. Prints
+one JSON object and a table.
 
 Results with machine details: benchmarks/README.md. With `--sync` (no asynchronous
 dispatch) every step runs on the calling thread: with asynchronous dispatch a step is
@@ -38,6 +41,12 @@ def _parse():
         "thread (what a real-time loop wants; steadier latency on a busy CPU)",
     )
     p.add_argument("--scan-hours", type=float, default=0.5)
+    p.add_argument(
+        "--xla-default",
+        action="store_true",
+        help="XLA's default CPU loops instead of the loop kernels that "
+        "`import jaxcable` turns on (JAXCABLE_NO_LOOP_KERNELS=1)",
+    )
     p.add_argument("--json-out", default=None)
     return p.parse_args()
 
@@ -61,6 +70,9 @@ def _times(fn, args, repeats, warmup=50):
 
 def main():
     args = _parse()
+    if args.xla_default:
+        # Read by `import jaxcable` (below), which otherwise sets the loop-kernel flag.
+        os.environ["JAXCABLE_NO_LOOP_KERNELS"] = "1"
     if args.x64:
         jax.config.update("jax_enable_x64", True)
     if args.sync:
@@ -124,6 +136,9 @@ def main():
         "backend": jax.default_backend(),
         "cpu": platform.processor() or platform.machine(),
         "cpu_count": os.cpu_count(),
+        # Whether XLA's CPU loop-kernel option is set (by `import jaxcable` or by hand).
+        "loop_kernels": "xla_cpu_small_while_loop_byte_threshold"
+        in os.environ.get("XLA_FLAGS", ""),
         "controller_step": rows,
         "closed_loop_us_per_sample": loop,
         "closed_loop_samples": samples,

@@ -40,13 +40,10 @@ import platform
 import time
 import warnings
 
+import jax
+import numpy as np
+
 import jaxcable as jc
-
-
-jc.enable_cpu_loop_kernels()
-
-import jax  # noqa: E402
-import numpy as np  # noqa: E402
 
 
 jax.config.update("jax_enable_x64", True)
@@ -205,6 +202,9 @@ def main():
         "rows": rows,
         "seconds": time.perf_counter() - began,
         "machine": f"{platform.machine()}, {os.cpu_count()} cores",
+        # Whether XLA's CPU loop-kernel option is set (`import jaxcable` sets it).
+        "loop_kernels": "xla_cpu_small_while_loop_byte_threshold"
+        in os.environ.get("XLA_FLAGS", ""),
     }
     text = json.dumps(out, indent=1, default=float)
     print(text)

@@ -3,7 +3,7 @@ against scipy.optimize.least_squares, with the same JAX Jacobian and with finite
 differences, on the same problems.
 
     python benchmarks/fit.py [--repeats 5] [--problems small,large,realistic]
-        [--json-out FILE]
+        [--xla-default] [--json-out FILE]
 
 Problems (Park's IntegratedModel, Dyneema SK78 defaults as the truth):
 
@@ -40,19 +40,26 @@ threads on a busy machine, each LAPACK call on the tall Jacobian (scipy's trf ta
 an SVD per step) can wait for a core far longer than it computes, which measures the
 machine, not the methods. Timings: jit and warm up, then the median of `--repeats` runs, each
 ended by `jax.block_until_ready`; the first call's extra time is reported as compile
-time. float64. Prints one JSON object and a table; results with machine details are
-kept in benchmarks/README.md.
+time. float64. The scans run with the CPU loop kernels that `import jaxcable` turns on;
+`--xla-default` keeps XLA's own CPU loops (`JAXCABLE_NO_LOOP_KERNELS=1`), and the
+JSON's `machine.loop_kernels` says which ran. Prints one JSON object and a table;
+results with machine details are kept in benchmarks/README.md.
 """
 
 import argparse
 import json
 import os
 import platform
+import sys
 import time
 
 
 # Before numpy is imported (see the module docstring).
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+# `import jaxcable` (below) turns on XLA's CPU loop kernels unless this says no, so
+# `--xla-default` is read here, before it (argparse declares it too, for --help).
+if "--xla-default" in sys.argv[1:]:
+    os.environ["JAXCABLE_NO_LOOP_KERNELS"] = "1"
 
 import jax  # noqa: E402
 
@@ -89,11 +96,17 @@ def _parse():
     p.add_argument("--problems", default="small,large,realistic")
     p.add_argument("--json-out", default=None)
     p.add_argument(
-        "--loop-kernels",
+        "--xla-default",
         action="store_true",
-        help="compile the scans' loops as single CPU kernels (jaxcable.enable_cpu_loop_kernels, as the command line does)",
+        help="XLA's default CPU loops instead of the loop kernels that "
+        "`import jaxcable` turns on (JAXCABLE_NO_LOOP_KERNELS=1)",
     )
     return p.parse_args()
+
+
+def loop_kernels_on() -> bool:
+    """Whether XLA's CPU loop-kernel option is set (by `import jaxcable` or by hand)."""
+    return "xla_cpu_small_while_loop_byte_threshold" in os.environ.get("XLA_FLAGS", "")
 
 
 def _history(peak, rest_samples):
@@ -354,8 +367,6 @@ def _run(name, repeats):
 
 def main():
     args = _parse()
-    if args.loop_kernels:
-        jc.enable_cpu_loop_kernels()
     reports = [_run(name, args.repeats) for name in args.problems.split(",")]
     try:
         load = os.getloadavg()
@@ -374,6 +385,7 @@ def main():
             scipy=scipy.__version__,
             jaxcable=jc.__version__,
             openblas_threads=os.environ.get("OPENBLAS_NUM_THREADS"),
+            loop_kernels=loop_kernels_on(),
             xla_flags=os.environ.get("XLA_FLAGS", ""),
         ),
         repeats=args.repeats,

@@ -4,7 +4,7 @@ scipy.optimize.least_squares (trf) with the same JAX residuals and Jacobian, in 
 run.
 
     python benchmarks/fit_each.py [--specimens 256] [--loop-specimens N]
-        [--scipy-specimens N] [--samples-per-ramp 90] [--repeats 1] [--loop-kernels]
+        [--scipy-specimens N] [--samples-per-ramp 90] [--repeats 1] [--xla-default]
         [--json-out FILE]
 
 The problem (Park's `IntegratedModel`; the realistic problem of `benchmarks/fit.py`
@@ -36,19 +36,28 @@ Rows:
 Checks: each looped specimen's parameters against its `fit_each` parameters
 (largest relative difference), and the fraction of specimens whose every fitted
 parameter is within 3 standard errors of its truth (and per parameter).
-OpenBLAS runs single-threaded, as in `benchmarks/fit.py`. Prints one JSON object and
-a table; results with machine details are kept in benchmarks/README.md.
+OpenBLAS runs single-threaded, as in `benchmarks/fit.py`. The scans run with the CPU
+loop kernels that `import jaxcable` turns on; `--xla-default` keeps XLA's own CPU
+loops (`JAXCABLE_NO_LOOP_KERNELS=1`), and the JSON's `loop_kernels` says which ran.
+Prints one JSON object and a table; results with machine details are kept in
+benchmarks/README.md.
 """
 
 import argparse
 import json
 import os
+import sys
 import time
 import warnings
 
 
 # Before numpy is imported (see benchmarks/fit.py).
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+# `import jaxcable` (below, and in benchmarks/fit.py) turns on XLA's CPU loop kernels
+# unless this says no, so `--xla-default` is read here, before it (argparse declares
+# it too, for --help).
+if "--xla-default" in sys.argv[1:]:
+    os.environ["JAXCABLE_NO_LOOP_KERNELS"] = "1"
 
 import jax  # noqa: E402
 
@@ -63,7 +72,7 @@ import scipy.optimize  # noqa: E402
 
 # benchmarks/fit.py and numpy_baseline.py, beside this file: the timing helper and
 # the machine's description.
-from fit import _median  # noqa: E402
+from fit import _median, loop_kernels_on  # noqa: E402
 from numpy_baseline import machine  # noqa: E402
 
 import jaxcable as jc  # noqa: E402
@@ -98,10 +107,10 @@ def _parse():
     p.add_argument("--repeats", type=int, default=1)
     p.add_argument("--json-out", default=None)
     p.add_argument(
-        "--loop-kernels",
+        "--xla-default",
         action="store_true",
-        help="compile the scans' loops as single CPU kernels "
-        "(jaxcable.enable_cpu_loop_kernels, as the command line does)",
+        help="XLA's default CPU loops instead of the loop kernels that "
+        "`import jaxcable` turns on (JAXCABLE_NO_LOOP_KERNELS=1)",
     )
     return p.parse_args()
 
@@ -183,8 +192,6 @@ def _scipy_loop(start, specimens, tol):
 
 def main():
     args = _parse()
-    if args.loop_kernels:
-        jc.enable_cpu_loop_kernels()
     t0 = time.perf_counter()
     start, truths, specimens = _specimens(args.specimens, args.samples_per_ramp)
     synthesis_seconds = time.perf_counter() - t0
@@ -284,7 +291,7 @@ def main():
             xla_flags=os.environ.get("XLA_FLAGS", ""),
         ),
         repeats=args.repeats,
-        loop_kernels=args.loop_kernels,
+        loop_kernels=loop_kernels_on(),
     )
     print(json.dumps(report, indent=2))
     p, e = report["problem"], report["fit_each"]

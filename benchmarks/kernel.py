@@ -2,11 +2,14 @@
 grad/forward time ratio, for the rate-driven integrated model (Newton inside).
 
     python benchmarks/kernel.py [--samples 2000] [--batches 1,16,64,256,1024]
-        [--repeats 5] [--x64] [--json-out FILE]
+        [--repeats 5] [--x64] [--xla-default] [--json-out FILE]
 
-Prints one JSON object and a table. Timings: jit, one warm-up call, then the median
-of `--repeats` calls, each ended by `jax.block_until_ready`. Results with machine
-details are kept in benchmarks/README.md.
+The scans run with the CPU loop kernels that `import jaxcable` turns on;
+`--xla-default` keeps XLA's own CPU loops (`JAXCABLE_NO_LOOP_KERNELS=1`), and the
+JSON's `machine.loop_kernels` says which ran. Prints one JSON object and a table.
+Timings: jit, one warm-up call, then the median of `--repeats` calls, each ended by
+`jax.block_until_ready`. Results with machine details are kept in
+benchmarks/README.md.
 """
 
 import argparse
@@ -25,12 +28,18 @@ def _parse():
     p.add_argument("--repeats", type=int, default=5)
     p.add_argument("--x64", action="store_true", help="run in float64")
     p.add_argument(
-        "--loop-kernels",
+        "--xla-default",
         action="store_true",
-        help="compile the scans' loops as single CPU kernels (jaxcable.enable_cpu_loop_kernels, as the command line does)",
+        help="XLA's default CPU loops instead of the loop kernels that "
+        "`import jaxcable` turns on (JAXCABLE_NO_LOOP_KERNELS=1)",
     )
     p.add_argument("--json-out", default=None)
     return p.parse_args()
+
+
+def _loop_kernels() -> bool:
+    # Whether XLA's CPU loop-kernel option is set (by `import jaxcable` or by hand).
+    return "xla_cpu_small_while_loop_byte_threshold" in os.environ.get("XLA_FLAGS", "")
 
 
 def _median_time(fn, *args, repeats):
@@ -46,6 +55,9 @@ def _median_time(fn, *args, repeats):
 
 def main():
     args = _parse()
+    if args.xla_default:
+        # Read by `import jaxcable` (below), which otherwise sets the loop-kernel flag.
+        os.environ["JAXCABLE_NO_LOOP_KERNELS"] = "1"
     load_at_start = list(os.getloadavg())
     if args.x64:
         jax.config.update("jax_enable_x64", True)
@@ -55,8 +67,6 @@ def main():
 
     import jaxcable as jc
 
-    if args.loop_kernels:
-        jc.enable_cpu_loop_kernels()
     model = jc.IntegratedModel()
     protocol = jc.Protocol.cycles(
         100.0, 1, samples_per_ramp=args.samples // 2, start=False
@@ -124,7 +134,7 @@ def main():
             backend=jax.default_backend(),
             devices=[str(d) for d in jax.devices()],
             dtype="float64" if args.x64 else "float32",
-            loop_kernels=args.loop_kernels,
+            loop_kernels=_loop_kernels(),
             xla_flags=os.environ.get("XLA_FLAGS", ""),
             load_average_at_start=load_at_start,
             load_average_at_end=list(os.getloadavg()),

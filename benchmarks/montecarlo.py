@@ -5,7 +5,8 @@ time, with its baselines measured in the same run.
     python benchmarks/montecarlo.py [--draws 100000] [--cables 8] [--samples 2000]
         [--driver force|rate] [--cpu-devices N] [--chunk-size C] [--bins 1024]
         [--method histogram|exact|auto]
-        [--baseline-draws 2048] [--x64] [--no-progress] [--json-out FILE]
+        [--baseline-draws 2048] [--x64] [--xla-default] [--no-progress]
+        [--json-out FILE]
 
 Measured, each after its compilation (reported separately):
 
@@ -18,9 +19,12 @@ Measured, each after its compilation (reported separately):
   `jax.jit(vmap(vmap(simulate_force_history)))` over all `--baseline-draws` draws at
   once (memory grows with the draws), then `numpy.percentile`.
 
-Rates are compared per draw (draws/s, and sample-steps/s = draws x cables x samples /
-time). Prints one JSON object, then a table; `ru_maxrss` is the process's peak
-resident memory. Results with machine details: benchmarks/README.md.
+The scans run with the CPU loop kernels that `import jaxcable` turns on;
+`--xla-default` keeps XLA's own CPU loops (`JAXCABLE_NO_LOOP_KERNELS=1`), and the
+JSON's `machine.loop_kernels` says which ran. Rates are compared per draw (draws/s,
+and sample-steps/s = draws x cables x samples / time). Prints one JSON object, then a
+table; `ru_maxrss` is the process's peak resident memory. Results with machine
+details: benchmarks/README.md.
 """
 
 import argparse
@@ -46,6 +50,12 @@ def _parse():
     )
     p.add_argument("--baseline-draws", type=int, default=2048)
     p.add_argument("--x64", action="store_true")
+    p.add_argument(
+        "--xla-default",
+        action="store_true",
+        help="XLA's default CPU loops instead of the loop kernels that "
+        "`import jaxcable` turns on (JAXCABLE_NO_LOOP_KERNELS=1)",
+    )
     p.add_argument("--no-progress", action="store_true")
     p.add_argument("--json-out", default=None)
     return p.parse_args()
@@ -53,6 +63,9 @@ def _parse():
 
 def main():
     args = _parse()
+    if args.xla_default:
+        # Read by `import jaxcable` (below), which otherwise sets the loop-kernel flag.
+        os.environ["JAXCABLE_NO_LOOP_KERNELS"] = "1"
     load_at_start = list(os.getloadavg())
     # Must precede the first import of jax.
     flags = os.environ.get("XLA_FLAGS", "")
@@ -214,6 +227,10 @@ def main():
             backend=jax.default_backend(),
             devices=[str(d) for d in jax.devices()],
             dtype="float64" if args.x64 else "float32",
+            # Whether XLA's CPU loop-kernel option is set (by `import jaxcable` or
+            # by hand).
+            loop_kernels="xla_cpu_small_while_loop_byte_threshold"
+            in os.environ.get("XLA_FLAGS", ""),
         ),
         problem=dict(
             driver=args.driver,

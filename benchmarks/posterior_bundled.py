@@ -3,11 +3,12 @@
 six and the long-term retardation time's lambda1, lambda2 (Park Eq. 8).
 
     python benchmarks/posterior_bundled.py [--every 1] [--chains 4] [--draws 500]
-        [--warmup 500] [--max-doublings 8] [--fit NAMES] [--no-loop-kernels]
+        [--warmup 500] [--max-doublings 8] [--fit NAMES] [--xla-default]
         [--progress] [--json-out FILE]
 
-The scans' loops run as single CPU kernels (`jaxcable.enable_cpu_loop_kernels`, as
-the command line), and each core is a CPU device
+The scans' loops run as single CPU kernels (which `import jaxcable` turns on;
+`--xla-default` keeps XLA's own CPU loops, `JAXCABLE_NO_LOOP_KERNELS=1`, and the
+JSON's `loop_kernels` says which ran), and each core is a CPU device
 (`XLA_FLAGS=--xla_force_host_platform_device_count=N`, as benchmarks/montecarlo.py),
 over which `sample_posterior` lays out its chains.
 The least-squares fit comes first (`jaxcable.fit`, timed apart), then NUTS from it. `--every K` keeps one sample in K of every file (as
@@ -22,10 +23,15 @@ import importlib.resources
 import json
 import os
 import platform
+import sys
 import time
 import warnings
 
 
+# `import jaxcable` (below) turns on XLA's CPU loop kernels unless this says no, so
+# `--xla-default` is read here, before it (argparse declares it too, for --help).
+if "--xla-default" in sys.argv[1:]:
+    os.environ["JAXCABLE_NO_LOOP_KERNELS"] = "1"
 # One CPU device per core (before JAX starts), over which the chains are laid out.
 os.environ["XLA_FLAGS"] = (
     os.environ.get("XLA_FLAGS", "")
@@ -65,16 +71,14 @@ def main():
         help="the fitted parameters (default: the demo's and lambda1, lambda2)",
     )
     p.add_argument(
-        "--no-loop-kernels",
+        "--xla-default",
         action="store_true",
-        help="XLA's default CPU loops (default: jaxcable.enable_cpu_loop_kernels, "
-        "as the command line)",
+        help="XLA's default CPU loops instead of the loop kernels that "
+        "`import jaxcable` turns on (JAXCABLE_NO_LOOP_KERNELS=1)",
     )
     p.add_argument("--progress", action="store_true")
     p.add_argument("--json-out", default=None)
     args = p.parse_args()
-    if not args.no_loop_kernels:
-        jc.enable_cpu_loop_kernels()
     folder = importlib.resources.files("jaxcable").joinpath("data")
     files = sorted(f for f in folder.iterdir() if f.name.endswith(".csv"))
     tests = [thin(jc.read_test(f), args.every) for f in files]
@@ -120,6 +124,9 @@ def main():
         ),
         "machine": f"{platform.machine()}, {os.cpu_count()} cores",
         "devices": len(jax.devices()),
+        # Whether XLA's CPU loop-kernel option is set (by `import jaxcable` or by hand).
+        "loop_kernels": "xla_cpu_small_while_loop_byte_threshold"
+        in os.environ.get("XLA_FLAGS", ""),
         "xla_flags": os.environ.get("XLA_FLAGS", ""),
         "load_average": os.getloadavg(),
     }

@@ -6,16 +6,19 @@ length, grad/forward time ratio, compile time, and the NumPy baseline
     python benchmarks/throughput.py [--x64] [--samples 2000]
         [--batches 1,4,16,64,256,1024,4096] [--lengths 100,1000,10000,100000,1000000]
         [--length-batches 1,64] [--numpy-batches 1,1024] [--max-seconds 3]
-        [--repeats 5] [--json-out FILE]
+        [--repeats 5] [--xla-default] [--json-out FILE]
 
-Prints one JSON object, then a table. Method: every function is `jax.jit`-ed and
-compiled ahead of the timed calls (`lower(...).compile()`, whose wall time is the
-reported compile time); a timed call ends with `jax.block_until_ready`; the reported
-time is the median of `--repeats` calls (fewer when one call is slow, so that each
-combination takes a few seconds). A (batch, length) combination whose predicted run
-time exceeds `--max-seconds` is skipped and listed with its prediction. The NumPy
-baseline always runs in float64 (its Newton tolerance, 1e-12, needs it); the kernel
-runs in float32 unless `--x64`. Results with machine details: benchmarks/README.md.
+The scans run with the CPU loop kernels that `import jaxcable` turns on;
+`--xla-default` keeps XLA's own CPU loops (`JAXCABLE_NO_LOOP_KERNELS=1`), and the
+JSON's `machine.loop_kernels` says which ran. Prints one JSON object, then a table.
+Method: every function is `jax.jit`-ed and compiled ahead of the timed calls
+(`lower(...).compile()`, whose wall time is the reported compile time); a timed call
+ends with `jax.block_until_ready`; the reported time is the median of `--repeats`
+calls (fewer when one call is slow, so that each combination takes a few seconds). A
+(batch, length) combination whose predicted run time exceeds `--max-seconds` is
+skipped and listed with its prediction. The NumPy baseline always runs in float64 (its
+Newton tolerance, 1e-12, needs it); the kernel runs in float32 unless `--x64`. Results
+with machine details: benchmarks/README.md.
 """
 
 import argparse
@@ -33,9 +36,10 @@ def _parse():
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--x64", action="store_true", help="run the kernel in float64")
     p.add_argument(
-        "--loop-kernels",
+        "--xla-default",
         action="store_true",
-        help="compile the scans' loops as single CPU kernels (jaxcable.enable_cpu_loop_kernels, as the command line does)",
+        help="XLA's default CPU loops instead of the loop kernels that "
+        "`import jaxcable` turns on (JAXCABLE_NO_LOOP_KERNELS=1)",
     )
     p.add_argument("--samples", type=int, default=2000)
     p.add_argument("--batches", default="1,4,16,64,256,1024,4096")
@@ -61,6 +65,9 @@ def _machine(dtype, load_at_start):
         backend=jax.default_backend(),
         devices=[str(d) for d in jax.devices()],
         dtype=dtype,
+        # Whether XLA's CPU loop-kernel option is set (by `import jaxcable` or by hand).
+        loop_kernels="xla_cpu_small_while_loop_byte_threshold"
+        in os.environ.get("XLA_FLAGS", ""),
         xla_flags=os.environ.get("XLA_FLAGS", ""),
     )
 
@@ -82,6 +89,9 @@ def _time_calls(fn, args, repeats, budget):
 
 def main():
     args = _parse()
+    if args.xla_default:
+        # Read by `import jaxcable` (below), which otherwise sets the loop-kernel flag.
+        os.environ["JAXCABLE_NO_LOOP_KERNELS"] = "1"
     load_at_start = list(os.getloadavg())
     if args.x64:
         jax.config.update("jax_enable_x64", True)
@@ -91,8 +101,6 @@ def main():
 
     import jaxcable as jc
 
-    if args.loop_kernels:
-        jc.enable_cpu_loop_kernels()
     sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
     from numpy_baseline import default_parameters, simulate_rate_test_numpy
 

@@ -16,8 +16,9 @@ from .piao import PIAO_TABLE1, FiveElementModel
 def _coefficients(x: ArrayLike) -> Array | np.ndarray:
     # A NumPy array stays on the host until the surface is evaluated: the preset
     # below is built when jaxcable is imported, and a JAX array there would start
-    # JAX's backend, after which XLA_FLAGS are no longer read
-    # (`jaxcable.enable_cpu_loop_kernels`).
+    # JAX's backend, after which XLA_FLAGS are no longer read (a user's flags set
+    # after the import, or another threshold `jaxcable.enable_cpu_loop_kernels`
+    # chooses, would do nothing).
     if isinstance(x, np.ndarray) and np.issubdtype(x.dtype, np.floating):
         return x
     return field_array(x)
