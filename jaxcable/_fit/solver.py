@@ -15,7 +15,11 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Bool, Float, PRNGKeyArray, PyTree
 
+from .lanes import residuals_and_jacobian, solve, with_jacobian_jvp
 from .problem import ResidualProblem
+
+
+__all__ = ["residuals_and_jacobian", "solve", "with_jacobian_jvp"]
 
 
 class LevenbergMarquardt(optx.AbstractGaussNewton):
@@ -90,147 +94,10 @@ class LevenbergMarquardt(optx.AbstractGaussNewton):
         return y, eqx.tree_at(lambda s: s.terminate, new, new.terminate | stop), aux
 
 
-# The solver's residuals are r / sqrt(_DAMPING * sum(e_measured^2)). A modulus that
-# carries all the elongation has |dr / dlog E|^2 ~ sum(e^2), the largest curvature
-# scale of the problem, so Levenberg-Marquardt's initial damping (lambda = 1 in the
-# solver's units) is _DAMPING times it: nearly a Gauss-Newton step, which the trust
-# region shortens where the model is not yet linear (Marquardt's lambda_0 = tau max
-# diag(J^T J), with a small tau for a start believed close; 1e-4 took the fewest
-# steps over the recovery tests' models).
-_DAMPING = 1e-4
 # Secant iterations of the data-derived start.
 _SECANT_ITERATIONS = 4
 # The data-derived stiffness factor stays within [1 / _SECANT_RANGE, _SECANT_RANGE].
 _SECANT_RANGE = 30.0
-
-
-def residuals_and_jacobian(
-    problem: ResidualProblem, u: Float[Array, " p"], jac: Literal["fwd", "bwd"]
-) -> tuple[Float[Array, " residuals"], Float[Array, "residuals p"]]:
-    """The flat residuals (m) and their Jacobian in u, in one differentiated scan:
-    forward mode carries the p tangents through the scan together, reverse mode one
-    cotangent per residual."""
-
-    jacobian, r, _ = _differentiated(
-        lambda u: (jnp.ravel(problem.residuals(u)), None), u, jac
-    )
-    return r, jacobian
-
-
-def _differentiated(residuals, u, jac: Literal["fwd", "bwd"]):
-    """`(jacobian, r, aux)` of `residuals(u) -> (r, aux)`: the Jacobian of r in u,
-    with r and aux from the same differentiated pass (no second simulation)."""
-
-    def flat(u):
-        r, aux = residuals(u)
-        return r, (r, aux)
-
-    differentiate = jax.jacfwd if jac == "fwd" else jax.jacrev
-    jacobian, (r, aux) = differentiate(flat, has_aux=True)(u)
-    return jacobian, r, aux
-
-
-def _zero_tangent(x):
-    x = jnp.asarray(x)
-    if jnp.issubdtype(x.dtype, jnp.inexact):
-        return jnp.zeros_like(x)
-    return np.zeros(x.shape, dtype=jax.dtypes.float0)
-
-
-def with_jacobian_jvp(
-    residuals: Callable[[Float[Array, " p"]], tuple[Float[Array, " n"], PyTree]],
-    jac: Literal["fwd", "bwd"] = "fwd",
-    scale: float | Float[Array, ""] = 1.0,
-) -> Callable[[Float[Array, " p"]], tuple[Float[Array, " n"], PyTree]]:
-    """Wrap `residuals(u) -> (r, aux)` for an optimistix least-squares solver: the
-    wrapped function returns `(r / scale, aux)`, and its JVP is a product with the
-    Jacobian computed together with r, in one differentiated pass.
-
-    Optimistix linearises the residual function and then materialises, transposes
-    and applies the linearisation. Through a simulation's scan each of those is its
-    own copy of the scan in the compiled program (a compile time about twice as long
-    for the calibration's program); with this rule they are products with one dense
-    (n, p) matrix, and the scan is differentiated once per step. `aux` (anything the
-    residuals computed on the way, e.g. the simulated values) has a zero tangent:
-    a solver's state then holds it at the returned point without a further
-    simulation.
-
-    **Arguments:**
-
-    - `residuals`: u (shape (p,)) -> (flat residuals (n,), aux).
-    - `jac`: the Jacobian's mode, `"fwd"` (p tangents through the scan together) or
-        `"bwd"` (one cotangent per residual).
-    - `scale`: the residuals and the Jacobian are divided by it.
-
-    **Returns:**
-
-    The wrapped function u -> `(r / scale, aux)`.
-    """
-
-    @jax.custom_jvp
-    def wrapped(u):
-        r, aux = residuals(u)
-        return r / scale, aux
-
-    @wrapped.defjvp
-    def _(primals, tangents):
-        (u,), (du,) = primals, tangents
-        jacobian, r, aux = _differentiated(residuals, u, jac)
-        tangent_aux = jax.tree.map(_zero_tangent, aux)
-        return (r / scale, aux), ((jacobian @ du) / scale, tangent_aux)
-
-    return wrapped
-
-
-def _scaled_residual_fn(problem: ResidualProblem, jac: Literal["fwd", "bwd"], scale):
-    """fn(u, args) for optimistix: the problem's residuals / scale, their JVP a
-    product with the Jacobian computed with them (`with_jacobian_jvp`)."""
-    fn = with_jacobian_jvp(
-        lambda u: (jnp.ravel(problem.residuals(u)), None), jac, scale
-    )
-    return lambda u, args: fn(u)[0]
-
-
-def solve(
-    problem: ResidualProblem,
-    u0: Float[Array, " p"],
-    solver: optx.AbstractGaussNewton,
-    max_steps: int,
-    jac: Literal["fwd", "bwd"],
-) -> tuple[
-    Float[Array, " p"],
-    optx.RESULTS,
-    Float[Array, ""],
-    Float[Array, " residuals"],
-    Float[Array, "residuals p"],
-]:
-    """One least-squares solve from `u0` (traceable; `fit_kernel` maps it over the
-    starts, `benchmarks/fit.py` times it alone).
-
-    **Arguments:**
-
-    - `problem`: the least-squares problem.
-    - `u0`: the start in u.
-    - `solver`: an optimistix Gauss-Newton-type solver.
-    - `max_steps`: solver steps.
-    - `jac`: the Jacobian's mode, `"fwd"` or `"bwd"`.
-
-    **Returns:**
-
-    `(u, result, steps, residuals, jacobian)`: the solution, the solver's result, its
-    steps, and the flat residuals (m) and their Jacobian in u at the solution.
-    """
-    data = problem.data
-    scale = jnp.sqrt(_DAMPING * jnp.sum((data.measured / data.scale[:, None]) ** 2))
-    fn = _scaled_residual_fn(problem, jac, scale)
-    sol = optx.least_squares(fn, solver, u0, max_steps=max_steps, throw=False)
-    # A Gauss-Newton-type solver's state holds the residuals and the linearised
-    # residual function at the returned (last accepted) point; with the rule of
-    # `_scaled_residual_fn` its matrix is the Jacobian, with no further scan.
-    f_info = sol.state.f_info
-    r = f_info.residual * scale
-    jacobian = f_info.jac.as_matrix() * scale
-    return sol.value, sol.result, sol.stats["num_steps"], r, jacobian
 
 
 class _SecantCarry(eqx.Module):
