@@ -97,6 +97,18 @@ def test_each_specimen_equals_its_own_fit(each):
     assert abs(each[1].values[0] / each[0].values[0] - 1.3) < 0.05
 
 
+def test_solves_waiting_for_a_lane_are_their_own(each):
+    # 14 copies of each specimen, 2 starts each: more solves (84) than the lanes
+    # that run them, so most solves wait, and each starts when a lane frees. Every
+    # copy ends where its specimen's own fit ends, whichever lane ran it and when.
+    results = jc.fit_each(_problems(SPECIMENS * 14), METHOD)
+    for k, result in enumerate(results):
+        alone = each[k % len(SPECIMENS)]
+        assert result.result == jc.RESULTS.successful
+        np.testing.assert_allclose(result.values, alone.values, rtol=1e-6)
+        assert result.num_steps == alone.num_steps
+
+
 def test_a_failing_specimen_returns_the_others(each):
     # Specimen 1's cables break under the start's creep: `jaxcable.fit` refuses
     # that start; here the specimen fails alone, with the simulation's result.

@@ -15,17 +15,18 @@ import jax
 import jax.numpy as jnp
 import jax.random as jr
 import numpy as np
-from jaxtyping import Array, Float, PRNGKeyArray
+from jaxtyping import PRNGKeyArray
 
 from .._models import AbstractCableModel
 from .._problem import LeastSquares, Problem
 from .._progress import AbstractProgressMeter, NoProgressMeter, check_progress_meter
 from .._results import RESULTS
-from .data import PaddedTests, pad_tests
+from .data import pad_tests
 from .fit import fit_result, least_squares_solver
 from .problem import ResidualProblem, make_problem, require_enough_samples
+from .queue import each_kernel
 from .result import FitResult, concrete_result
-from .solver import KernelMethod, KernelOut, fit_kernel
+from .solver import KernelMethod
 from .specimens import (
     Group,
     failed_result,
@@ -99,36 +100,6 @@ def _checked_key(key) -> PRNGKeyArray | np.ndarray:
 def _domain(model: AbstractCableModel, cables) -> RESULTS:
     """`model.check` of every test's cable, shape (specimens, tests)."""
     return jax.vmap(jax.vmap(model.check))(cables)
-
-
-@eqx.filter_jit
-def each_kernel(
-    problem: ResidualProblem,
-    data: PaddedTests,
-    u_user: Float[Array, " p"],
-    key: PRNGKeyArray,
-    method: KernelMethod,
-) -> KernelOut:
-    """`fit_kernel` of every specimen, vmapped: `problem` with its data replaced by
-    each specimen's (`data`, stacked on a leading axis); the other arguments as in
-    `fit_kernel`, the same for every specimen.
-
-    The solver's loop runs until every specimen's solve has stopped. A specimen
-    whose start does not simulate (its result is discarded) stops at its first
-    step, on non-finite residuals, unless its data-derived start simulates: then
-    it costs what its own solve costs.
-
-    **Returns:**
-
-    The `KernelOut` of every specimen, stacked on a leading axis.
-    """
-
-    def one(d: PaddedTests) -> KernelOut:
-        return fit_kernel(
-            eqx.tree_at(lambda p: p.data, problem, d), u_user, key, method
-        )
-
-    return jax.vmap(one)(data)
 
 
 def _solve_group(

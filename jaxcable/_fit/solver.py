@@ -246,23 +246,43 @@ def fit_kernel(
 
     A `KernelOut`.
     """
-    u_start, start_ok = _data_derived_start(problem, u_user)
+    starts, start_ok = kernel_starts(problem, u_user, key, method)
     solver, max_steps, jac = method.solver, method.max_steps, method.jac
-    shape = (method.num_starts - 1, u_user.shape[0])
-    noise = method.spread * jr.normal(key, shape, u_user.dtype)
-    starts = jnp.concatenate([u_start[None], u_start[None] + noise])
-    data = problem.data
     # The starts in lockstep (one vmapped solve, as long as the slowest start): the
     # scans of a fit are bound by their per-sample cost, not by the batch, so the
     # starts together take less time than one after the other (`lax.map`), for the
     # same compile time.
-    values, results, steps, r, jacobian = jax.vmap(
-        lambda u0: solve(problem, u0, solver, max_steps, jac)
-    )(starts)
+    solved = jax.vmap(lambda u0: solve(problem, u0, solver, max_steps, jac))(starts)
+    return kernel_choose(problem, starts, start_ok, solved)
+
+
+def kernel_starts(
+    problem: ResidualProblem,
+    u_user: Float[Array, " p"],
+    key: PRNGKeyArray,
+    method: KernelMethod,
+) -> tuple[Float[Array, "starts p"], Bool[Array, " tests"]]:
+    """The starts of a fit in u, the data-derived one first, then `num_starts - 1`
+    perturbations of it; and whether the user's start simulates on each test."""
+    u_start, start_ok = _data_derived_start(problem, u_user)
+    shape = (method.num_starts - 1, u_user.shape[0])
+    noise = method.spread * jr.normal(key, shape, u_user.dtype)
+    return jnp.concatenate([u_start[None], u_start[None] + noise]), start_ok
+
+
+def kernel_choose(
+    problem: ResidualProblem,
+    starts: Float[Array, "starts p"],
+    start_ok: Bool[Array, " tests"],
+    solved: tuple,
+) -> KernelOut:
+    """The `KernelOut` of a fit from its starts' solves (`solved`: `lanes.solve`'s
+    outputs, stacked over the starts): the best converged start (else the best
+    finite one) and the statistics' inputs at it."""
+    values, results, steps, r, jacobian = solved
     ssr = jnp.sum(r**2, axis=1)
     ssr = jnp.where(jnp.isfinite(ssr), ssr, jnp.inf)
     converged = (results == optx.RESULTS.successful) & jnp.isfinite(ssr)
-    # The best converged start; if none converged, the best finite one.
     best = jnp.where(
         jnp.any(converged),
         jnp.argmin(jnp.where(converged, ssr, jnp.inf)),
@@ -278,7 +298,7 @@ def fit_kernel(
         steps=steps,
         ssr=ssr,
         best=best,
-        residuals=jnp.reshape(r[best], data.time.shape),
+        residuals=jnp.reshape(r[best], problem.data.time.shape),
         gram=jacobian[best].T @ jacobian[best],
         natural=problem.natural_flat(u_best),
         params=problem.params(u_best),
