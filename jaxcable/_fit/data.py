@@ -288,7 +288,12 @@ def _scales(rows: list[_Row]) -> np.ndarray:
 
 
 def pad_tests(
-    tests, *, drive=None, multiple: int = 16, covariate: str | None = None
+    tests,
+    *,
+    drive=None,
+    multiple: int = 16,
+    covariate: str | None = None,
+    on_device: bool = True,
 ) -> PaddedTests:
     """Check, pad and stack tests for [`jaxcable.residuals`][] and the fit kernel.
 
@@ -308,6 +313,8 @@ def pad_tests(
     - `covariate`: the name of an extra column of every test (`test.extra[name]`,
         in its own unit) read into `PaddedTests.covariate`, the per-sample
         `Cable.covariate` of the fit; None (default): 0 throughout.
+    - `on_device`: the arrays transferred to JAX's device (default), or left as
+        NumPy arrays (for many specimens stacked and transferred together).
 
     **Returns:**
 
@@ -351,7 +358,8 @@ def pad_tests(
     def put(x, dtype: DTypeLike = dtype):
         # Converted by NumPy, then transferred: `jnp.asarray` of a NumPy array runs
         # a small compiled program per shape and dtype, `device_put` only copies.
-        return jax.device_put(np.asarray(x, dtype))
+        x = np.asarray(x, dtype)
+        return jax.device_put(x) if on_device else x
 
     # One transfer per field (not per test): host overhead counts in a small fit.
     cable = jax.tree_util.tree_map(

@@ -232,7 +232,9 @@ def fit_each(
     with meter.bar("checking the specimens", len(specimen_list)) as bar:
         for k, (tests, d) in enumerate(zip(specimen_list, drives)):
             try:
-                datas.append(pad_tests(tests, drive=d, covariate=covariate))
+                datas.append(
+                    pad_tests(tests, drive=d, covariate=covariate, on_device=False)
+                )
             except ValueError as e:
                 raise ValueError(f"`problems[{k}]`: {e}") from None
             bar.advance()

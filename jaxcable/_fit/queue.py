@@ -25,16 +25,20 @@ from .problem import ResidualProblem
 from .solver import KernelMethod, KernelOut, kernel_choose, kernel_starts
 
 
-# The lanes of the queue: an eighth of the solves, at least 64 (or all of them). Fewer
-# lanes than solves make a lane that finishes early take another solve instead of
-# idling; enough of them keep the vectorised step busy while a few slow solves run
-# to the end alone. Measured on 256 specimens x 4 starts (benchmarks/fit_each.py).
+# The lanes of the queue. Fewer lanes than solves make a lane that finishes early take
+# another solve instead of idling. On a CPU a lane's step costs about the same at any
+# width, so few lanes waste least: 256 specimens x 4 starts (benchmarks/
+# fit_each_small.py) took 4.3-4.5 s warm on 4 to 32 lanes, 6.6 s on 128 and 19 s on
+# all 1024. An accelerator's step is wide: an eighth of the solves, at least 64.
+CPU_LANES = 16
 LANE_FRACTION = 8
 MIN_LANES = 64
 
 
 def num_lanes(jobs: int) -> int:
-    """The lanes that run `jobs` solves."""
+    """The lanes that run `jobs` solves on JAX's default backend."""
+    if jax.default_backend() == "cpu":
+        return min(jobs, CPU_LANES)
     return min(jobs, max(MIN_LANES, math.ceil(jobs / LANE_FRACTION)))
 
 
