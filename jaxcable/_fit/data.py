@@ -3,6 +3,7 @@
 import dataclasses
 import os
 import pathlib
+from typing import cast
 
 import equinox as eqx
 import jax
@@ -359,7 +360,9 @@ def pad_tests(
         # Converted by NumPy, then transferred: `jnp.asarray` of a NumPy array runs
         # a small compiled program per shape and dtype, `device_put` only copies.
         x = np.asarray(x, dtype)
-        return jax.device_put(x) if on_device else x
+        # NumPy arrays stand in for the device's until `fit_each` stacks and
+        # transfers them.
+        return jax.device_put(x) if on_device else cast(jax.Array, x)
 
     # One transfer per field (not per test): host overhead counts in a small fit.
     cable = jax.tree_util.tree_map(

@@ -242,6 +242,32 @@ def lane_finish(
     )
 
 
+def finish_at(
+    problem: ResidualProblem,
+    lane: "Lane",
+    solver: optx.AbstractGaussNewton,
+    jac: Literal["fwd", "bwd"],
+    max_steps: int,
+):
+    """`lane_finish` of a lane whose solver state was not kept: the residuals and
+    their Jacobian evaluated again at its iterate (where the state held them: the
+    last accepted point is the iterate; before any step, zeros, as the state's)."""
+    result = optx.RESULTS.where(
+        (lane.result == optx.RESULTS.successful) & ~lane.terminate,
+        optx.RESULTS.nonlinear_max_steps_reached,
+        lane.result,
+    )
+    r, jacobian = residuals_and_jacobian(problem, lane.y, jac)
+    stepped = lane.num_steps > 0
+    return (
+        lane.y,
+        result,
+        lane.num_steps,
+        jnp.where(stepped, r, 0.0),
+        jnp.where(stepped, jacobian, 0.0),
+    )
+
+
 def solve(
     problem: ResidualProblem,
     u0: Float[Array, " p"],

@@ -20,7 +20,7 @@ import jax.tree_util as jtu
 from jaxtyping import Array, Float, Int, PRNGKeyArray
 
 from .data import PaddedTests
-from .lanes import Lane, lane_advance, lane_finish, lane_init
+from .lanes import Lane, finish_at, lane_advance, lane_init
 from .problem import ResidualProblem
 from .solver import KernelMethod, KernelOut, kernel_choose, kernel_starts
 
@@ -50,6 +50,12 @@ class _Queue(eqx.Module):
     lanes: Lane
     store: Lane
     next: Int[Array, ""]
+
+
+def _kept(lane: Lane) -> Lane:
+    # What the store keeps of a stopped solve: not its solver state, whose residuals
+    # and Jacobian (most of its size) `finish_at` evaluates again.
+    return Lane(lane.y, lane.num_steps, None, lane.terminate, lane.result)
 
 
 def _at(problem: ResidualProblem, data: PaddedTests, specimen) -> ResidualProblem:
@@ -116,7 +122,7 @@ def each_kernel(
         done = ~jax.vmap(lambda x: x.running(max_steps))(lanes) & (q.job >= 0)
         slot = jnp.where(done, q.job, jobs)
         store = jtu.tree_map(
-            lambda s, x: s.at[slot].set(x, mode="drop"), q.store, lanes
+            lambda s, x: s.at[slot].set(x, mode="drop"), q.store, _kept(lanes)
         )
         job = jnp.where(done, q.next + jnp.cumsum(done) - 1, q.job)
         job = jnp.where(done & (job >= jobs), -1, job)
@@ -125,12 +131,12 @@ def each_kernel(
 
     width = num_lanes(jobs)
     first = jnp.arange(width)
-    store = jax.vmap(init)(jnp.arange(jobs))
+    store = _kept(jax.vmap(init)(jnp.arange(jobs)))
     queue = _Queue(first, jax.vmap(init)(first), store, jnp.asarray(width))
     queue = jax.lax.while_loop(lambda q: jnp.any(q.job >= 0), step, queue)
 
     solved = jax.vmap(
-        lambda j, lane: lane_finish(
+        lambda j, lane: finish_at(
             _at(problem, data, j // n), lane, solver, jac, max_steps
         )
     )(jnp.arange(jobs), queue.store)
