@@ -130,7 +130,11 @@ from ._montecarlo import (
     Uniform as Uniform,
     monte_carlo as monte_carlo,
 )
-from ._problem import LeastSquares as LeastSquares, Problem as Problem
+from ._problem import (
+    LeastSquares as LeastSquares,
+    Problem as Problem,
+    StreamingLeastSquares as StreamingLeastSquares,
+)
 from ._progress import (
     AbstractProgressMeter as AbstractProgressMeter,
     CallbackProgressMeter as CallbackProgressMeter,

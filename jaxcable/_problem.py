@@ -221,3 +221,37 @@ class LeastSquares(eqx.Module):
                 "`solver` must be an optimistix Gauss-Newton-type least-squares "
                 f"solver (optx.LevenbergMarquardt, ...), got {self.solver!r}."
             )
+
+
+class StreamingLeastSquares(eqx.Module):
+    """The least-squares method of [`jaxcable.fit`][] for records of any length:
+    Levenberg-Marquardt on the normal equations J^T J, J^T r accumulated sample by
+    sample in one forward scan of each test, so that memory does not grow with the
+    record (a robot's day at 100 Hz is 8.6 million samples; the Jacobian itself,
+    n x p, is never formed). Each step costs about (p + 1) simulations of the record.
+    Force-driven tests only (their elongation is scored), one start (the
+    data-scaled one), no per-test parameters.
+
+    **Fields:**
+
+    - `max_steps`: the most Levenberg-Marquardt steps (default 100).
+    - `rtol`, `atol`: converged when every coordinate of the step in the
+        unconstrained parameters is below `atol + rtol |u|` (default 1e-8 both).
+    - `damping`: the initial Marquardt damping, relative to the diagonal of J^T J
+        (default 1e-3).
+
+    **Raises:**
+
+    `ValueError` or `TypeError` naming the field.
+    """
+
+    max_steps: int = eqx.field(default=100, static=True)
+    rtol: float = eqx.field(default=1e-8, static=True)
+    atol: float = eqx.field(default=1e-8, static=True)
+    damping: float = eqx.field(default=1e-3, static=True)
+
+    def __check_init__(self):
+        require_int("max_steps", self.max_steps, low=1)
+        require_number("rtol", self.rtol, low=0)
+        require_number("atol", self.atol, low=0)
+        require_number("damping", self.damping, low=0)

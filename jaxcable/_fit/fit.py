@@ -21,7 +21,7 @@ from jaxtyping import PRNGKeyArray
 
 from .._drive import FORCE_DRIVEN
 from .._models import MODELS, AbstractCableModel, transform_table
-from .._problem import LeastSquares, Problem
+from .._problem import LeastSquares, Problem, StreamingLeastSquares
 from .._results import RESULTS
 from .data import (
     test_id,
@@ -43,6 +43,7 @@ from .statistics import (
     Statistics,
     statistics,
 )
+from .stream import streaming_kernel
 
 
 def least_squares_solver(method: LeastSquares) -> optx.AbstractGaussNewton:
@@ -189,7 +190,10 @@ def _rmse(
 
 
 def fit(
-    problem: Problem, method: LeastSquares = LeastSquares(), *, throw: bool = True
+    problem: Problem,
+    method: LeastSquares | StreamingLeastSquares = LeastSquares(),
+    *,
+    throw: bool = True,
 ) -> FitResult:
     """Fit a model's parameters to one or many tests by least squares.
 
@@ -283,7 +287,9 @@ def fit(
         parameters to fit (and which per test), their transforms, the drives and
         the covariate.
     - `method`: a [`jaxcable.LeastSquares`][]: the solver, its steps, and the
-        starts (default `jaxcable.LeastSquares()`).
+        starts (default `jaxcable.LeastSquares()`); or a
+        [`jaxcable.StreamingLeastSquares`][] for a record too long to hold its
+        Jacobian (memory independent of its length).
     - `throw`: raise `RuntimeError` when no start converged (default), with the
         solver's message and the identifiability warnings; with `False` return the
         best start, its `result` the solver's ([`jaxcable.RESULTS`][]: optimistix's
@@ -306,9 +312,12 @@ def fit(
         raise TypeError(
             f"`problem` must be a jaxcable.Problem, got {type(problem).__name__}."
         )
+    if isinstance(method, StreamingLeastSquares):
+        return _fit_streaming(problem, method, throw)
     if not isinstance(method, LeastSquares):
         raise TypeError(
-            f"`method` must be a jaxcable.LeastSquares, got {type(method).__name__}."
+            "`method` must be a jaxcable.LeastSquares or a "
+            f"jaxcable.StreamingLeastSquares, got {type(method).__name__}."
         )
     solver = least_squares_solver(method)
     test_list = list(problem.tests)
@@ -347,6 +356,48 @@ def fit(
         per,
         throw,
         start_note=note,
+    )
+
+
+def _fit_streaming(
+    problem: Problem, method: StreamingLeastSquares, throw: bool
+) -> FitResult:
+    """`fit` with the normal equations accumulated over each record
+    (`stream.solve_streaming`): the same `FitResult`, from one start."""
+    if problem.per_test:
+        raise ValueError(
+            "`problem.per_test`: jaxcable.StreamingLeastSquares fits shared "
+            "parameters only."
+        )
+    test_list = list(problem.tests)
+
+    def attempt(start):
+        residual_problem, u_user = make_problem(
+            start,
+            test_list,
+            problem.fit,
+            (),
+            problem.transform_map,
+            problem.drive,
+            problem.covariate,
+        )
+        if residual_problem.data.by_elongation.size:
+            raise ValueError(
+                "`problem.tests`: jaxcable.StreamingLeastSquares fits force-driven "
+                "tests (their elongation scored); some are elongation-driven."
+            )
+        require_enough_samples(residual_problem.data, residual_problem.layout.size)
+        out = streaming_kernel(residual_problem, u_user, method)
+        _require_valid_start(out, test_list, residual_problem)
+        return residual_problem, out
+
+    (residual_problem, out), note = with_moved_start(
+        problem.model, test_list, problem.drive, attempt
+    )
+    layout = residual_problem.layout
+    units = tuple(u for u, s in zip(layout.units, layout.sizes) for _ in range(s))
+    return fit_result(
+        out, residual_problem, test_list, layout.labels, units, (), throw, note
     )
 
 

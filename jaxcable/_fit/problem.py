@@ -25,6 +25,7 @@ from .._drive import (
 )
 from .._models import AbstractCableModel, ParameterInfo, identifiable
 from .._results import RESULTS
+from .blocks import blocked_scan
 from .data import PaddedTests, pad_tests, test_id
 from .parameters import (
     Layout,
@@ -92,10 +93,11 @@ def _elongation_history(
         new = jax.tree_util.tree_map(lambda a, b: jnp.where(m, a, b), new, carry)
         return new, new.strain
 
-    final, strain = jax.lax.scan(
+    final, strain = blocked_scan(
         body,
         init_state(model, cable, time[0]),
         (time, force, mask, temperature, covariate),
+        off=(2,),
     )
     return strain * cable.length, final.result
 
