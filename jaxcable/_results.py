@@ -74,3 +74,17 @@ class RESULTS(optx.RESULTS):  # pyright: ignore[reportGeneralTypeIssues]
         "(a simulation failed, or a parameter left its domain). Try other start "
         "values or fewer fitted parameters."
     )
+    estimator_diverged = (
+        "The online estimator of the cables' parameters diverged: its prediction was "
+        "not finite, its model failed on the measured forces, or the position fixes "
+        "disagreed with it beyond its gate for several fixes in a row (a force of the "
+        "wrong sign, a miscalibrated load cell, a model that cannot describe the "
+        "cables). Its estimates are frozen and the predicted elongation is the "
+        "nominal model's."
+    )
+    signal_lost = (
+        "A signal the online estimator needs is missing: no position fix for longer "
+        "than its `max_fix_gap`, or a load cell whose reading has not changed for "
+        "longer than its `stuck_time`. The estimator predicts without updating its "
+        "estimates until the signal is back."
+    )

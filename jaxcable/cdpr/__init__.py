@@ -8,9 +8,17 @@ Every function is pure JAX: a whole run (hours of pick-and-place) is one jitted
 - `robot`: the robot's geometry, tension distribution and kinematics;
 - `scenario`: the pick-and-place task and the "real" cables;
 - `run`: the closed loop and the comparison of compensation models;
-- `tuning`: derivatives through the closed loop and gain tuning.
+- `tuning`: derivatives through the closed loop and gain tuning;
+- `estimator`, `signals`: a robot that calibrates its own cables (an online
+    estimator of each cable's parameters beside the controller, and what it measures).
 """
 
+from .estimator import (
+    DEFAULT_PARAMETERS as DEFAULT_PARAMETERS,
+    EstimatorState as EstimatorState,
+    OnlineEstimator as OnlineEstimator,
+    interval_covers as interval_covers,
+)
 from .robot import (
     BREAKING_LOAD as BREAKING_LOAD,
     DIAMETER as DIAMETER,
@@ -39,6 +47,7 @@ from .scenario import (
     pick_and_place as pick_and_place,
     real_cables as real_cables,
 )
+from .signals import Fix as Fix, fix_prediction as fix_prediction
 from .tuning import (
     GainTuning as GainTuning,
     errors_and_jacobian as errors_and_jacobian,
