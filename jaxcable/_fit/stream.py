@@ -144,6 +144,17 @@ class StreamOut(eqx.Module):
     converged: bool
 
 
+def _small(normal: Normal, u: np.ndarray, method: StreamingLeastSquares) -> bool:
+    """Whether the Gauss-Newton step from `normal` is below `atol + rtol |u|` in
+    every coordinate."""
+    gram, gradient = np.asarray(normal.gram), np.asarray(normal.gradient)
+    try:
+        step = np.linalg.lstsq(gram, -gradient, rcond=None)[0]
+    except np.linalg.LinAlgError:
+        return False
+    return bool(np.all(np.abs(step) <= method.atol + method.rtol * np.abs(u)))
+
+
 def solve_streaming(
     problem: ResidualProblem, u0: Float[Array, " p"], method: StreamingLeastSquares
 ) -> StreamOut:
@@ -168,8 +179,10 @@ def solve_streaming(
         if np.isfinite(ssr) and ssr <= float(normal.ssr):
             u, normal = trial, candidate
             damping = max(damping / 3.0, 1e-12)
-            small = np.abs(delta) <= method.atol + method.rtol * np.abs(np.asarray(u))
-            if small.all():
+            # Converged where the next undamped (Gauss-Newton) step is small: a
+            # damped step is small also far from the optimum when the damping is
+            # large.
+            if _small(normal, np.asarray(u), method):
                 return StreamOut(u, normal, steps, True)
         else:
             damping *= 4.0
