@@ -26,8 +26,8 @@ test: $(STAMP)
 	# processes also because late in one long process XLA's CPU compiler crashed
 	# (SIGSEGV, SIGABRT) on a fresh clone; each half of the suite alone passes.
 	# tests/conftest.py compiles with XLA's faster-compiling CPU emitters when this jaxlib
-	# has them, and with the scans' loops as single kernels (jaxcable.enable_cpu_loop_kernels,
-	# as the command line); `make test-xla-default` runs the same suite with XLA's defaults.
+	# has them, and with the scans' loops as single kernels (as `import jaxcable` sets them
+	# up); `make test-xla-default` runs the same suite with XLA's defaults.
 	$(BIN)/pytest -q --durations=25 -n $(WORKERS) --dist loadgroup --no-loadscope-reorder tests
 
 test-xla-default: $(STAMP)
