@@ -39,25 +39,29 @@ def _rich_scenario(minutes: float, seed: int = 0, segment: float = 10.0):
 
 
 @eqx.filter_jit
-def _closed_loop(estimator, scenario, real, fixes, reversed_forces):
+def _closed_loop(estimator, scenario, real, fixes, reversed_forces, stuck=None):
     """The robot of `cdpr.simulate_robot` compensated by the estimator's prediction;
     a fix (exact) of the previous sample where `fixes`; the load cells' variations
-    reversed (max + min - F) where `reversed_forces`."""
+    reversed (max + min - F) where `reversed_forces`; the first load cell's reading
+    frozen where `stuck`."""
+    stuck = jnp.zeros_like(fixes) if stuck is None else stuck
     robot = estimator.robot
     x0 = scenario.position[0]
     lengths0 = robot.free_lengths(x0)
     t0 = scenario.time[0]
     real_state = jc.controller_init(real, robot.cables(lengths0), t0, per_cable=True)
     nominal = jc.controller_init(estimator.model, robot.cables(lengths0), t0)
-    carry = (estimator.init(lengths0, x0, t0), real_state, nominal, x0, lengths0)
+    state0 = estimator.init(lengths0, x0, t0)
+    carry = (state0, real_state, nominal, x0, lengths0, jnp.zeros_like(lengths0))
 
     def body(carry, sample):
-        state, real_state, nominal, x, command = carry
-        t, x_d, payload, fix_here = sample
+        state, real_state, nominal, x, command, last = carry
+        t, x_d, payload, fix_here, stuck_here = sample
         forces = cdpr.tension_distribution(robot, x, robot.platform_mass + payload)
         fed = jnp.where(
             reversed_forces, jnp.max(forces) + jnp.min(forces) - forces, forces
         )
+        fed = fed.at[0].set(jnp.where(stuck_here, last[0], fed[0]))
         lengths = robot.free_lengths(x_d)
         state, predicted = estimator.step(
             state, t, fed, lengths, cdpr.Fix(x, command, fix_here)
@@ -74,9 +78,9 @@ def _closed_loop(estimator, scenario, real, fixes, reversed_forces):
         record = (predicted, reference, state.result == jc.RESULTS.successful)
         record += (state.result == jc.RESULTS.estimator_diverged,)
         record += (state.result == jc.RESULTS.signal_lost,)
-        return (state, real_state, nominal, x, command), record
+        return (state, real_state, nominal, x, command, fed), record
 
-    xs = (scenario.time, scenario.position, scenario.payload, fixes)
+    xs = (scenario.time, scenario.position, scenario.payload, fixes, stuck)
     (state, *_), records = jax.lax.scan(body, carry, xs)
     return state, records
 
@@ -219,7 +223,7 @@ def test_reversed_forces_diverge_and_fall_back_to_nominal(short_loop):
     scenario, fixes, real = short_loop
     estimator = cdpr.OnlineEstimator(ROBOT)
     state, (predicted, nominal, ok, diverged, _) = _closed_loop(
-        estimator, scenario, real, fixes, jnp.asarray(True)
+        estimator, scenario, real, fixes, jnp.asarray(True), jnp.zeros_like(fixes)
     )
     assert state.result == jc.RESULTS.estimator_diverged
     assert bool(state.diverged)
@@ -239,7 +243,7 @@ def test_no_fix_for_too_long_is_a_lost_signal_until_fixes_return(short_loop):
     # No fix between 60 s and 180 s (max_fix_gap 60 s).
     gap = (scenario.time > 60) & (scenario.time < 180)
     state, (_, _, ok, diverged, lost) = _closed_loop(
-        estimator, scenario, real, fixes & ~gap, NO
+        estimator, scenario, real, fixes & ~gap, NO, jnp.zeros_like(fixes)
     )
     t = scenario.time
     assert not bool(jnp.any(diverged))
@@ -247,3 +251,19 @@ def test_no_fix_for_too_long_is_a_lost_signal_until_fixes_return(short_loop):
     assert not bool(jnp.any(lost[t < 110]))
     assert bool(jnp.all(ok[t > 185]))
     assert state.result == jc.RESULTS.successful
+
+
+def test_a_stuck_load_cell_is_a_lost_signal_while_it_lasts(short_loop):
+    scenario, fixes, real = short_loop
+    estimator = cdpr.OnlineEstimator(ROBOT)
+    t = scenario.time
+    stuck = (t >= 100) & (t < 160)
+    state, (_, _, ok, diverged, lost) = _closed_loop(
+        estimator, scenario, real, fixes, NO, stuck
+    )
+    # Lost once the reading has not changed for stuck_time (30 s), back after.
+    assert not bool(jnp.any(diverged))
+    assert bool(jnp.all(lost[(t > 131) & (t < 160)]))
+    assert not bool(jnp.any(lost[t < 129]))
+    assert bool(jnp.all(ok[t >= 160]))
+    assert bool(jnp.all(jnp.isfinite(state.log_parameters)))
