@@ -9,8 +9,9 @@ Every function is pure JAX: a whole run (hours of pick-and-place) is one jitted
 - `scenario`: the pick-and-place task and the "real" cables;
 - `run`: the closed loop and the comparison of compensation models;
 - `tuning`: derivatives through the closed loop and gain tuning;
-- `estimator`, `signals`: a robot that calibrates its own cables (an online
-    estimator of each cable's parameters beside the controller, and what it measures).
+- `estimator`, `signals`, `online`: a robot that calibrates its own cables (an
+    online estimator of each cable's parameters beside the controller, what it
+    measures, and the closed loop it compensates).
 """
 
 from .estimator import (
@@ -18,6 +19,11 @@ from .estimator import (
     EstimatorState as EstimatorState,
     OnlineEstimator as OnlineEstimator,
     interval_covers as interval_covers,
+)
+from .online import (
+    OnlineRun as OnlineRun,
+    Sensors as Sensors,
+    simulate_online as simulate_online,
 )
 from .robot import (
     BREAKING_LOAD as BREAKING_LOAD,
