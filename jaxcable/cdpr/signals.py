@@ -25,7 +25,7 @@ class Fix(eqx.Module):
         the fix, m, shape `(n,)`.
     - `valid`: whether there is a fix at this sample (a scalar boolean): a robot
         passes a `Fix` at every sample, with `valid=False` between fixes, so that one
-        compiled step serves both ([`jaxcable.cdpr.Fix.missing`][]).
+        compiled step serves both (`Fix.missing`).
     """
 
     position: Float[Array, " 3"] = eqx.field(converter=field_array)
