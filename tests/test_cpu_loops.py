@@ -181,10 +181,14 @@ with warnings.catch_warnings(record=True) as caught:
         import jax.numpy as jnp
         jnp.zeros(()).block_until_ready()
     import jaxcable as jc
+    flags = os.environ.get("XLA_FLAGS")
+    if sys.argv[1] == "replace":
+        jc.enable_cpu_loop_kernels(4096)
     import jax.numpy as jnp
     float(jnp.ones(3).sum())
 print(json.dumps(dict(
-    flags=os.environ.get("XLA_FLAGS"),
+    flags=flags,
+    replaced=os.environ.get("XLA_FLAGS"),
     warnings=[type(w.message).__name__ for w in caught],
     late=[str(w.message) for w in caught if issubclass(w.category, jc.LoopKernelWarning)],
 )))
@@ -241,19 +245,14 @@ def test_importing_jaxcable_too_late_warns_once():
     assert _import_in_fresh_process("late", **{NO_LOOP_KERNELS_ENV: "1"})["late"] == []
 
 
-def test_a_call_of_the_users_replaces_the_imports_default(monkeypatch):
-    # This process imported jaxcable before computing (tests/conftest.py), but its
-    # backend runs now: the replacement is checked on the flags alone.
-    import jaxcable._cpu_loops as loops
-
-    monkeypatch.setattr(loops, "_backend_started", lambda: False)
-    monkeypatch.setattr(loops, "_import_flags", ("--a", "--a --x=1"))
-    monkeypatch.setenv("XLA_FLAGS", "--a --x=1")
-    assert jc.enable_cpu_loop_kernels(2048) == (
-        f"--a --xla_backend_extra_options={_OPTION}=2048"
+def test_a_call_of_the_users_replaces_the_imports_default():
+    out = _import_in_fresh_process(
+        "replace", XLA_FLAGS="--xla_cpu_use_fusion_emitters=false"
     )
-    # Flags that are no longer the import's are the user's: their threshold kept.
-    monkeypatch.setenv("XLA_FLAGS", f"--b --xla_backend_extra_options={_OPTION}=7")
-    assert jc.enable_cpu_loop_kernels(2048) == (
-        f"--b --xla_backend_extra_options={_OPTION}=7"
+    assert out["replaced"] == (
+        "--xla_cpu_use_fusion_emitters=false "
+        f"--xla_backend_extra_options={_OPTION}=4096"
     )
+    # A threshold the user set before the import stays theirs, even then.
+    mine = f"--xla_backend_extra_options={_OPTION}=7"
+    assert _import_in_fresh_process("replace", XLA_FLAGS=mine)["replaced"] == mine
