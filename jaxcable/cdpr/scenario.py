@@ -125,6 +125,8 @@ def real_cables(
     relative_std: float = 0.05,
     compliance: float = 2e-5,
     model: IntegratedModel = NOMINAL,
+    bedded_in=(),
+    bedded_ratio: float = 1.5,
 ) -> AbstractCableModel:
     """The cables of the simulated "real" robot: one parameter set per cable drawn
     around the controller's model, plus an effect the controller's model lacks.
@@ -134,7 +136,20 @@ def real_cables(
     cable-to-cable scatter), with [`jaxcable.IndependentParameters`][]; the cables
     are then wrapped in [`jaxcable.TerminationCompliance`][], a length-independent
     series compliance (splices, the pulley and the winch drum) that none of the
-    compensation models has.
+    compensation models has. The cables listed in `bedded_in` carry a rope already
+    bedded in: its reloading modulus E1r is `bedded_ratio` times its drawn E1c (Park's
+    constructional elongation taken out, so that reloads are stiffer than the first
+    loading).
+
+    **Arguments:**
+
+    - `key`: the draw's key.
+    - `num_cables`: n.
+    - `relative_std`: the standard deviation of each parameter's log (0.3: 30 %).
+    - `compliance`: the terminations' series compliance, m/N.
+    - `model`: the median model.
+    - `bedded_in`: indices of the bedded-in cables (none by default).
+    - `bedded_ratio`: their E1r / E1c (> 1).
 
     **Returns:**
 
@@ -154,4 +169,73 @@ def real_cables(
         ),
         drawn,
     )
+    bedded = np.zeros(num_cables, bool)
+    bedded[list(bedded_in)] = True
+    if bedded.any():
+        if not bedded_ratio > 1:
+            raise ValueError(f"`bedded_ratio` must be > 1, got {bedded_ratio}.")
+        E1r = jnp.where(bedded, bedded_ratio * broadcast.E1c, broadcast.E1r)
+        broadcast = eqx.tree_at(lambda m: m.E1r, broadcast, E1r)
     return TerminationCompliance(broadcast, jnp.full(num_cables, compliance))
+
+
+def real_sensors(
+    key: PRNGKeyArray,
+    scenario: Scenario,
+    num_cables: int = 8,
+    *,
+    fix_every: float = 10.0,
+    fix_noise: float = 0.5e-3,
+    force_noise: float = 0.5,
+    force_drift: float = 1.0,
+    dropouts=(),
+    stuck=(),
+):
+    """The imperfect sensors of the simulated "real" robot, for
+    [`jaxcable.cdpr.simulate_online`][]: noisy, drifting load cells, a load cell that
+    sticks, noisy position fixes at a fixed period with dropouts.
+
+    **Arguments:**
+
+    - `key`: the draw's key.
+    - `scenario`: the [`jaxcable.cdpr.Scenario`][] (its time, s).
+    - `num_cables`: n.
+    - `fix_every`: s between position fixes (none at the start).
+    - `fix_noise`: standard deviation of each coordinate of a fix, m.
+    - `force_noise`: standard deviation of the load cells' white noise, N.
+    - `force_drift`: standard deviation of each load cell's drift rate, N/h (a
+        linear drift from zero at the start, its rate drawn per cell).
+    - `dropouts`: `((start, duration), ...)`, s: no fix in these spans.
+    - `stuck`: `((cable, start, duration), ...)`, s: that load cell repeats its last
+        reading in that span.
+
+    **Returns:**
+
+    A [`jaxcable.cdpr.Sensors`][].
+    """
+    from .online import Sensors  # the loop's module imports this one
+
+    if not (fix_every > 0 and fix_noise >= 0 and force_noise >= 0):
+        raise ValueError(
+            "`fix_every` must be positive and `fix_noise`, `force_noise` >= 0."
+        )
+    time = np.asarray(scenario.time)
+    T = time.size
+    t = time - time[0]
+    k_fix, k_noise, k_drift = jax.random.split(key, 3)
+    period = np.round(fix_every / np.median(np.diff(time))).astype(int) if T > 1 else 1
+    fix = (np.arange(T) % max(period, 1) == 0) & (np.arange(T) > 0)
+    for start, duration in dropouts:
+        fix &= ~((t >= start) & (t < start + duration))
+    dtype = jnp.result_type(float, scenario.time)
+    rate = force_drift / 3600.0 * jax.random.normal(k_drift, (num_cables,), dtype)
+    noise = force_noise * jax.random.normal(k_noise, (T, num_cables), dtype)
+    held = np.zeros((T, num_cables), bool)
+    for cable, start, duration in stuck:
+        held[:, cable] |= (t >= start) & (t < start + duration)
+    return Sensors(
+        fix=jnp.asarray(fix),
+        fix_error=fix_noise * jax.random.normal(k_fix, (T, 3), dtype),
+        force_error=noise + jnp.asarray(t, dtype)[:, None] * rate[None, :],
+        stuck=jnp.asarray(held),
+    )

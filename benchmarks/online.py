@@ -1,0 +1,439 @@
+"""A robot that calibrates its own cables, in a scenario that does not flatter it: the
+8-cable robot of `jaxcable.cdpr` compensated by its online estimator
+(`jaxcable.cdpr.OnlineEstimator` in `jaxcable.cdpr.simulate_online`), against the
+nominal compensation and an oracle, over `--draws` draws of the real cables; the cost
+of one estimator step; a day-long log fitted in bounded memory.
+
+    python benchmarks/online.py [--draws 20] [--hours 2] [--day-samples 8640000]
+        [--no-fix-draws N] [--json-out FILE]
+
+**The scenario (per draw).** The pick-and-place of `jaxcable.cdpr.pick_and_place`
+(`--hours`, 1 Hz). The real cables (`jaxcable.cdpr.real_cables`): every parameter of
+the integrated model drawn log-normally with 30 % around the defaults, a termination
+compliance of 2e-5 m/N (0.4 mm at 200 N on every cable, in no model of the
+controller's), and a rope already bedded in on cables 1, 4 and 6 (E1r = 1.5 E1c). The
+sensors (`jaxcable.cdpr.scenario.real_sensors`): load cells with 0.5 N of white noise
+and a linear drift (rate drawn with 1 N/h standard deviation per cell), a position fix
+every 10 s with 0.5 mm of noise per coordinate, one dropout of the fixes (10 minutes
+from 55 % of the run; a sixth of the run when that is shorter) and load cell 2 stuck
+for 60 s (from 25 % of the run).
+
+**The compensations compared.** `nominal`: `jaxcable.cdpr.simulate_robot` with the
+nominal model (exact forces: the library's own baseline). `online`: the estimator
+(E1c, E1r, E3r and t_e of each cable, its defaults) on the imperfect sensors.
+`oracle`: the real cables' own model, their true parameters and the termination
+compliance, predicting from the same load-cell readings (noise, drift, the stuck
+cell) at the desired position's free lengths: the best a compensation that knows the
+cables exactly can do with the signals and the control law of the robot. `no_fix`:
+the estimator with no position fix at all (geometry and load cells only; the first
+`--no-fix-draws` draws).
+
+**Reported per draw:** the RMS position error (mm) over the second half of the run
+(the second hour of 2 h) of each; `covered_95`, the share of the identified
+parameters (those whose posterior standard deviation fell below half the prior's)
+whose 95 % interval holds the truth, the others listed apart; `parameters`
+(estimates, intervals, truth); the failures: divergence, `RESULTS.signal_lost` during
+the dropout and the stuck cell, the time to recover after each.
+
+**Costs.** `step_us`: one estimator step for 8 cables, float64, CPU: the median per
+call of a jitted step called from Python, and the total time of a jitted `lax.scan` of
+steps divided by its samples. `loop_seconds`: the 2 h closed loop (the compiling first
+call apart). `day_log`: `benchmarks/day_log.py`'s worker (`jaxcable.fit` with
+`jaxcable.StreamingLeastSquares`) on `--day-samples` samples at 100 Hz in a fresh
+process: seconds and peak RSS.
+"""
+
+import argparse
+import json
+import os
+import platform
+import statistics
+import subprocess
+import sys
+import time
+
+import jax
+
+
+jax.config.update("jax_enable_x64", True)
+
+import equinox as eqx  # noqa: E402
+import jax.numpy as jnp  # noqa: E402
+import numpy as np  # noqa: E402
+
+import jaxcable as jc  # noqa: E402
+from jaxcable import cdpr  # noqa: E402
+from jaxcable.cdpr.scenario import real_sensors  # noqa: E402
+
+
+ROBOT = cdpr.Robot()
+RELATIVE_STD = 0.3
+COMPLIANCE = 2e-5
+BEDDED_IN = (1, 4, 6)
+STUCK_CABLE = 2
+RECOVERY_S = 300.0
+
+
+def _parse():
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--draws", type=int, default=20)
+    p.add_argument("--hours", type=float, default=2.0)
+    p.add_argument("--day-samples", type=int, default=8_640_000)
+    p.add_argument(
+        "--no-fix-draws", type=int, default=None, help="draws run without fixes"
+    )
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--step-samples", type=int, default=600)
+    p.add_argument("--repeats", type=int, default=300)
+    p.add_argument("--json-out", default=None)
+    return p.parse_args()
+
+
+def _events(hours: float):
+    span = hours * 3600.0
+    dropout = (0.55 * span, min(600.0, span / 6))
+    stuck = (STUCK_CABLE, 0.25 * span, 60.0)
+    return dropout, stuck
+
+
+@eqx.filter_jit
+def _oracle(robot, scenario, real, sensors):
+    """The closed loop of `simulate_online` with the real cables' own model (true
+    parameters, per cable) as the compensation, fed with the load cells' readings."""
+    x0, t0 = scenario.position[0], scenario.time[0]
+    lengths0 = robot.free_lengths(x0)
+    init = jc.controller_init(real, robot.cables(lengths0), t0, per_cable=True)
+    carry = (init, init, x0, jnp.zeros_like(lengths0))
+
+    def body(carry, sample):
+        ctrl, real_state, x, last = carry
+        t, x_d, payload, force_error, stuck = sample
+        forces = cdpr.tension_distribution(robot, x, robot.platform_mass + payload)
+        reading = jnp.where(stuck, last, forces + force_error)
+        lengths = robot.free_lengths(x_d)
+        ctrl, predicted = jc.controller_step(
+            real, robot.cables(lengths), ctrl, t, reading, throw=False
+        )
+        command = lengths - predicted
+        real_state, elongation = jc.controller_step(
+            real, robot.cables(command), real_state, t, forces
+        )
+        x = cdpr.forward_kinematics(robot, command + elongation - robot.routing, x)
+        return (ctrl, real_state, x, reading), x
+
+    xs = (
+        scenario.time,
+        scenario.position,
+        scenario.payload,
+        sensors.force_error,
+        sensors.stuck,
+    )
+    _, position = jax.lax.scan(body, carry, xs)
+    return position
+
+
+def _rms_mm(error, mask) -> float:
+    return 1e3 * float(np.sqrt(np.mean(np.sum(np.asarray(error)[mask] ** 2, axis=-1))))
+
+
+def _truth(estimator, real) -> np.ndarray:
+    base = real.base
+    return np.stack(
+        [np.asarray(getattr(base, name)) for name in estimator.parameters], axis=1
+    )
+
+
+def _recovery(t, code, start, end, successful) -> dict:
+    """Whether `signal_lost` was reported in [start + grace, end) and how long after
+    `end` the estimator was successful again (s; None if never)."""
+    lost = int(jc.RESULTS.signal_lost._value)  # noqa: SLF001
+    during = (t >= start) & (t < end)
+    after = np.nonzero((t >= end) & (code == successful))[0]
+    return dict(
+        start_s=float(start),
+        end_s=float(end),
+        lost_share=float(np.mean(code[during] == lost)) if during.any() else 0.0,
+        recovered_after_s=float(t[after[0]] - end) if after.size else None,
+    )
+
+
+def _code(result) -> np.ndarray:
+    return np.asarray(result._value)  # noqa: SLF001
+
+
+def _run_draw(draw, key, scenario, estimator, hours, no_fix: bool) -> dict:
+    dropout, stuck = _events(hours)
+    k_real, k_sensors = jax.random.split(key)
+    real = cdpr.real_cables(
+        k_real,
+        relative_std=RELATIVE_STD,
+        compliance=COMPLIANCE,
+        bedded_in=BEDDED_IN,
+    )
+    sensors = real_sensors(
+        k_sensors, scenario, ROBOT.num_cables, dropouts=(dropout,), stuck=(stuck,)
+    )
+    t = np.asarray(scenario.time)
+    late = t >= t[0] + 0.5 * (t[-1] - t[0])
+    t0 = time.perf_counter()
+    online = cdpr.simulate_online(estimator, scenario, real, sensors)
+    jax.block_until_ready(online)
+    loop_seconds = time.perf_counter() - t0
+    nominal = cdpr.simulate_robot(ROBOT, scenario, real, cdpr.NOMINAL)
+    oracle = _oracle(ROBOT, scenario, real, sensors)
+    state = online.state
+    truth = _truth(estimator, real)
+    low, high = (np.asarray(a) for a in state.interval())
+    std = np.asarray(state.std)
+    identified = std < 0.5 * estimator.prior_std
+    covers = (truth >= low) & (truth <= high)
+    code = _code(online.result)
+    ok = int(jc.RESULTS.successful._value)  # noqa: SLF001
+    diverged = int(jc.RESULTS.estimator_diverged._value)  # noqa: SLF001
+    names = list(estimator.parameters)
+    row = dict(
+        draw=draw,
+        rms_nominal_mm=_rms_mm(nominal.error, late),
+        rms_online_mm=_rms_mm(online.run.error, late),
+        rms_oracle_mm=_rms_mm(oracle - scenario.position, late),
+        covered_95=float(np.mean(covers[identified])) if identified.any() else None,
+        parameters=dict(
+            names=names,
+            estimate=np.asarray(state.parameters).tolist(),
+            low_95=low.tolist(),
+            high_95=high.tolist(),
+            truth=truth.tolist(),
+            relative_std=std.tolist(),
+            identified=identified.tolist(),
+            not_identified=[
+                f"cable {i} {names[j]}" for i, j in zip(*np.nonzero(~identified))
+            ],
+            covered=covers.tolist(),
+            bedded_in=list(BEDDED_IN),
+        ),
+        identified=int(identified.sum()),
+        covered=int((covers & identified).sum()),
+        diverged=bool(np.any(code == diverged)),
+        final_result=str(state.result) or "successful",
+        dropout=_recovery(t, code, dropout[0] + 61.0, sum(dropout), ok),
+        stuck=_recovery(t, code, stuck[1] + 31.0, stuck[1] + stuck[2], ok),
+        loop_seconds=loop_seconds,
+    )
+    if no_fix:
+        blind = eqx.tree_at(lambda s: s.fix, sensors, jnp.zeros_like(sensors.fix))
+        run = cdpr.simulate_online(estimator, scenario, real, blind)
+        row["rms_no_fix_mm"] = _rms_mm(run.run.error, late)
+        row["no_fix_diverged"] = bool(np.any(_code(run.result) == diverged))
+    return row
+
+
+def _step_us(estimator, scenario, samples: int, repeats: int) -> dict:
+    """One estimator step for the robot's cables: jitted scan / samples and the
+    median jitted call from Python."""
+    scenario = scenario[: samples + 1]
+    real = cdpr.real_cables(jax.random.key(99), relative_std=RELATIVE_STD)
+    sensors = real_sensors(jax.random.key(98), scenario, ROBOT.num_cables)
+    run = cdpr.simulate_online(estimator, scenario, real, sensors).run
+    lengths = jax.vmap(ROBOT.free_lengths)(scenario.position)
+    fixes = cdpr.Fix(
+        run.position + sensors.fix_error, run.command, jnp.asarray(sensors.fix)
+    )
+    x0 = scenario.position[0]
+    state0 = estimator.init(lengths[0], x0, scenario.time[0])
+    xs = (scenario.time[1:], run.forces[1:], lengths[1:])
+    fix_xs = jax.tree.map(lambda a: a[:-1], fixes)
+
+    @jax.jit
+    def scan(state, xs, fix_xs):
+        def body(s, sample):
+            (t, f, length), fix = sample
+            return estimator.step(s, t, f, length, fix)
+
+        return jax.lax.scan(body, state, (xs, fix_xs))
+
+    jax.block_until_ready(scan(state0, xs, fix_xs))
+    scan_times = []
+    for _ in range(5):
+        t0 = time.perf_counter()
+        jax.block_until_ready(scan(state0, xs, fix_xs))
+        scan_times.append(time.perf_counter() - t0)
+    step = jax.jit(lambda s, *args: estimator.step(s, *args))
+    state = state0
+    per_call = []
+    for k in range(min(repeats, samples)):
+        args = (xs[0][k], xs[1][k], xs[2][k], jax.tree.map(lambda a: a[k], fix_xs))
+        if k < 20:  # warm-up
+            state, _ = jax.block_until_ready(step(state, *args))
+            continue
+        t0 = time.perf_counter()
+        state, _ = jax.block_until_ready(step(state, *args))
+        per_call.append(time.perf_counter() - t0)
+    return dict(
+        scan_us=1e6 * statistics.median(scan_times) / samples,
+        call_us=1e6 * statistics.median(per_call),
+        call_p90_us=1e6 * float(np.percentile(per_call, 90)),
+        samples=samples,
+        dtype=str(state0.strain.dtype),
+    )
+
+
+def _day_log(samples: int) -> dict:
+    script = os.path.join(os.path.dirname(os.path.abspath(__file__)), "day_log.py")
+    done = subprocess.run(
+        [sys.executable, script, "--worker", str(samples)],
+        capture_output=True,
+        text=True,
+    )
+    if done.returncode != 0:
+        return dict(samples=samples, error=done.stderr[-2000:])
+    row = json.loads(done.stdout.strip().splitlines()[-1])
+    return dict(
+        samples=row["samples"],
+        seconds=row["seconds"],
+        peak_rss_mb=row["peak_rss_mb"],
+        steps=row.get("steps"),
+        result=row.get("result"),
+    )
+
+
+def _targets(rows, step, loop_seconds, day) -> dict:
+    n = len(rows)
+    good = [
+        r["rms_online_mm"] <= 1.5 * r["rms_oracle_mm"]
+        and r["rms_online_mm"] <= 0.2 * r["rms_nominal_mm"]
+        for r in rows
+    ]
+    identified = sum(r["identified"] for r in rows)
+    covered = sum(r["covered"] for r in rows)
+    failures_ok = [
+        not r["diverged"]
+        and r[e]["lost_share"] > 0.99
+        and r[e]["recovered_after_s"] is not None
+        and r[e]["recovered_after_s"] <= RECOVERY_S
+        for r in rows
+        for e in ("dropout", "stuck")
+    ]
+    coverage = covered / identified if identified else None
+    return dict(
+        accuracy=dict(
+            met=sum(good) >= int(np.ceil(0.9 * n)),
+            draws_meeting=sum(good),
+            draws=n,
+            required=int(np.ceil(0.9 * n)),
+        ),
+        coverage=dict(
+            met=coverage is not None and coverage >= 0.9,
+            covered=covered,
+            identified=identified,
+            share=coverage,
+        ),
+        failures=dict(met=all(failures_ok), ok=sum(failures_ok), of=len(failures_ok)),
+        step=dict(met=step["call_us"] <= 1000.0 and step["scan_us"] <= 1000.0),
+        loop=dict(met=loop_seconds is not None and loop_seconds <= 60.0),
+        day_log=dict(met=day.get("peak_rss_mb", np.inf) <= 2048.0),
+    )
+
+
+def main():
+    args = _parse()
+    scenario = cdpr.pick_and_place(hours=args.hours)
+    estimator = cdpr.OnlineEstimator(ROBOT)
+    no_fix_draws = args.draws if args.no_fix_draws is None else args.no_fix_draws
+    keys = jax.random.split(jax.random.key(args.seed), args.draws)
+    rows = []
+    t_all = time.perf_counter()
+    for d in range(args.draws):
+        row = _run_draw(d, keys[d], scenario, estimator, args.hours, d < no_fix_draws)
+        rows.append(row)
+        print(
+            f"draw {d}: nominal {row['rms_nominal_mm']:.2f} online "
+            f"{row['rms_online_mm']:.2f} oracle {row['rms_oracle_mm']:.2f} mm "
+            f"no-fix {row.get('rms_no_fix_mm', float('nan')):.2f} covered "
+            f"{row['covered']}/{row['identified']} loop {row['loop_seconds']:.1f} s",
+            file=sys.stderr,
+            flush=True,
+        )
+    loops = [r["loop_seconds"] for r in rows[1:]] or [rows[0]["loop_seconds"]]
+    loop_seconds = statistics.median(loops) * 2.0 / args.hours
+    step = _step_us(estimator, scenario, args.step_samples, args.repeats)
+    day = _day_log(args.day_samples)
+    no_fix = [r for r in rows if "rms_no_fix_mm" in r]
+    out = dict(
+        rows=rows,
+        step_us=step["call_us"],
+        step=step,
+        day_log=day,
+        loop_seconds=loop_seconds,
+        loop=dict(
+            hours=args.hours,
+            first_call_s=rows[0]["loop_seconds"],
+            median_s=statistics.median(loops),
+            scaled_to_2h_s=loop_seconds,
+        ),
+        no_fix=dict(
+            draws=len(no_fix),
+            rms_no_fix_mm=[r["rms_no_fix_mm"] for r in no_fix],
+            median_gain_over_nominal=statistics.median(
+                [1.0 - r["rms_no_fix_mm"] / r["rms_nominal_mm"] for r in no_fix]
+            )
+            if no_fix
+            else None,
+        ),
+        targets=_targets(rows, step, loop_seconds, day),
+        setup=dict(
+            hours=args.hours,
+            draws=args.draws,
+            relative_std=RELATIVE_STD,
+            compliance_m_per_N=COMPLIANCE,
+            bedded_in=list(BEDDED_IN),
+            events=dict(zip(("dropout", "stuck"), _events(args.hours))),
+            estimator=dict(
+                parameters=list(estimator.parameters),
+                prior_std=estimator.prior_std,
+                drift=estimator.drift,
+                fix_noise=estimator.fix_noise,
+            ),
+            oracle="the real cables' model and true parameters (termination "
+            "compliance included) predicting from the load cells' readings",
+            total_seconds=time.perf_counter() - t_all,
+        ),
+        machine=dict(
+            platform=platform.platform(),
+            cpu_count=os.cpu_count(),
+            python=platform.python_version(),
+            jax=jax.__version__,
+        ),
+    )
+    print(json.dumps(out, indent=1, default=str))
+    _table(out)
+    if args.json_out:
+        with open(args.json_out, "w") as f:
+            json.dump(out, f, indent=1, default=str)
+
+
+def _table(out):
+    print(
+        f"\n{'draw':>4} {'nominal':>8} {'online':>8} {'oracle':>8} {'no fix':>8} "
+        f"{'on/or':>6} {'on/nom':>6} {'cov95':>6} {'ident':>5} {'drop rec s':>10} "
+        f"{'stuck rec s':>11}"
+    )
+    for r in out["rows"]:
+        cov = "-" if r["covered_95"] is None else f"{r['covered_95']:.2f}"
+        print(
+            f"{r['draw']:>4} {r['rms_nominal_mm']:>8.2f} {r['rms_online_mm']:>8.2f} "
+            f"{r['rms_oracle_mm']:>8.2f} {r.get('rms_no_fix_mm', float('nan')):>8.2f} "
+            f"{r['rms_online_mm'] / r['rms_oracle_mm']:>6.2f} "
+            f"{r['rms_online_mm'] / r['rms_nominal_mm']:>6.2f} {cov:>6} "
+            f"{r['identified']:>5} {str(r['dropout']['recovered_after_s']):>10} "
+            f"{str(r['stuck']['recovered_after_s']):>11}"
+        )
+    s, d = out["step"], out["day_log"]
+    print(
+        f"\nstep: {s['call_us']:.0f} us per call, {s['scan_us']:.0f} us in a scan; "
+        f"2 h loop {out['loop_seconds']:.1f} s; day log {d}"
+    )
+    print("targets: " + json.dumps(out["targets"]))
+
+
+if __name__ == "__main__":
+    main()
