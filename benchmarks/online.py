@@ -44,6 +44,7 @@ process: seconds and peak RSS.
 """
 
 import argparse
+import functools
 import json
 import os
 import platform
@@ -137,10 +138,14 @@ def _rms_mm(error, mask) -> float:
 
 
 def _truth(estimator, real) -> np.ndarray:
-    base = real.base
-    return np.stack(
-        [np.asarray(getattr(base, name)) for name in estimator.parameters], axis=1
-    )
+    """The real cables' values of the estimated parameters, `(n, p)`: a name of the
+    integrated model is looked up in the real cables' base model, a dotted one
+    (`base.E1c`, `compliance`) in the real cables' wrapped model."""
+    values = []
+    for name in estimator.parameters:
+        owner = real if "." in name or name == "compliance" else real.base
+        values.append(np.asarray(functools.reduce(getattr, name.split("."), owner)))
+    return np.stack(values, axis=1)
 
 
 def _recovery(t, code, start, end, successful) -> dict:
