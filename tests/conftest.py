@@ -180,6 +180,7 @@ SLOW_FIRST = (
     "tests/test_long_histories.py",  # 22 s
     "tests/test_shared_kernel.py",  # 21 s
     "tests/test_errors.py",  # 20 s
+    f"{NOTEBOOK_RUNS}07_self_calibration.ipynb]",  # 20 s
     f"{NOTEBOOK_RUNS}01_papers.ipynb]",  # 19 s
     "tests/test_controller.py",  # 17 s
     "tests/test_cpu_loops.py",  # 16 s, one fresh interpreter
