@@ -285,3 +285,35 @@ def test_simulate_online_compensates_better_than_the_nominal_model(short_loop):
     # Cables drawn 10 % around the nominal model: 5 mm of error left by the
     # nominal compensation, about 1 mm by the estimator's after three minutes.
     assert rms(online.run) < 0.4 * rms(nominal)
+
+
+def test_real_sensors_and_bedded_in_cables():
+    from jaxcable.cdpr.scenario import real_sensors
+
+    scenario = cdpr.pick_and_place(hours=0.5)
+    t = np.asarray(scenario.time)
+    sensors = real_sensors(
+        jax.random.key(0),
+        scenario,
+        ROBOT.num_cables,
+        force_drift=36.0,
+        dropouts=[(600.0, 300.0)],
+        stuck=[(2, 100.0, 60.0)],
+    )
+    fix = np.asarray(sensors.fix)
+    # A fix every 10 s, none in the dropout.
+    assert (
+        not fix[0] and fix[10] and not fix[11] and not fix[(t >= 600) & (t < 900)].any()
+    )
+    assert fix.sum() == np.sum((t % 10 == 0) & (t > 0)) - 30
+    stuck = np.asarray(sensors.stuck)
+    assert stuck[:, 2].sum() == 60 and stuck.sum() == 60
+    # 0.5 mm and 0.5 N of noise; the drift (36 N/h per cell) grows with time.
+    assert 0.4e-3 < float(jnp.std(sensors.fix_error)) < 0.6e-3
+    error = np.asarray(sensors.force_error)
+    assert 0.4 < np.std(np.diff(error, axis=0)) / np.sqrt(2) < 0.6
+    assert np.mean(np.abs(error[-100:])) > 5 * np.mean(np.abs(error[:100]))
+    real = cdpr.real_cables(jax.random.key(1), relative_std=0.3, bedded_in=(1, 4))
+    ratio = np.asarray(real.base.E1r / real.base.E1c)
+    np.testing.assert_allclose(ratio[[1, 4]], 1.5)
+    assert not np.allclose(ratio[[0, 2, 3]], 1.5)
