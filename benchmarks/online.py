@@ -5,7 +5,7 @@ nominal compensation and an oracle, over `--draws` draws of the real cables; the
 of one estimator step; a day-long log fitted in bounded memory.
 
     python benchmarks/online.py [--draws 20] [--hours 2] [--day-samples 8640000]
-        [--no-fix-draws N] [--json-out FILE]
+        [--no-fix-draws N] [--drift D] [--json-out FILE]
 
 **The scenario (per draw).** The pick-and-place of `jaxcable.cdpr.pick_and_place`
 (`--hours`, 1 Hz). The real cables (`jaxcable.cdpr.real_cables`): every parameter of
@@ -84,6 +84,12 @@ def _parse():
         "--no-fix-draws", type=int, default=None, help="draws run without fixes"
     )
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument(
+        "--drift",
+        type=float,
+        default=None,
+        help="the estimator's random walk of the logs, 1/sqrt(s) (default: its own)",
+    )
     p.add_argument("--step-samples", type=int, default=600)
     p.add_argument("--repeats", type=int, default=300)
     p.add_argument("--json-out", default=None)
@@ -342,7 +348,8 @@ def _targets(rows, step, loop_seconds, day) -> dict:
 def main():
     args = _parse()
     scenario = cdpr.pick_and_place(hours=args.hours)
-    estimator = cdpr.OnlineEstimator(ROBOT)
+    options = {} if args.drift is None else dict(drift=args.drift)
+    estimator = cdpr.OnlineEstimator(ROBOT, **options)
     no_fix_draws = args.draws if args.no_fix_draws is None else args.no_fix_draws
     keys = jax.random.split(jax.random.key(args.seed), args.draws)
     rows = []
