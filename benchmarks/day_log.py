@@ -77,7 +77,9 @@ def _worker(samples: int) -> dict:
         seconds=seconds,
         peak_rss_mb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
         steps=result.num_steps,
-        result=str(result.result) or "successful",
+        result="successful"
+        if result.result == jc.RESULTS.successful
+        else str(result.result),
         fitted={n: float(v) for n, v in zip(result.names, result.values)},
         truth={n: float(getattr(truth, n)) for n in FIT},
         stderr={n: float(s) for n, s in zip(result.names, result.stderr)},

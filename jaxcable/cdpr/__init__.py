@@ -52,6 +52,7 @@ from .scenario import (
     Scenario as Scenario,
     pick_and_place as pick_and_place,
     real_cables as real_cables,
+    real_sensors as real_sensors,
 )
 from .signals import Fix as Fix, fix_prediction as fix_prediction
 from .tuning import (
