@@ -2,10 +2,10 @@
 (`optx.least_squares`) split into `lane_init`, `lane_advance` and `lane_finish`.
 
 A solve of `jaxcable.fit` runs the three in one program (`solve`). `jaxcable.fit_each`
-runs many solves as the lanes of one vmapped loop, a few steps at a time: between
-chunks, a lane whose solve has stopped takes the next solve waiting
-(`_fit/queue.py`), so that solves that converged in 20 steps do not wait, lane by
-lane, for the one that takes 256. Each lane's iterates are those of its own solve,
+runs many solves as the lanes of one vmapped loop, one step at a time: after each
+step, a lane whose solve has stopped takes the next solve waiting (`_fit/queue.py`,
+which finishes a stored solve with `finish_at`), so that solves that converged in 20
+steps do not wait, lane by lane, for the one that takes 256. Each lane's iterates are those of its own solve,
 step for step: the same state, the same steps, the same test of termination as
 optimistix's `iterative_solve` (its cond, body and the max-steps result).
 """
@@ -244,7 +244,7 @@ def lane_finish(
 
 def finish_at(
     problem: ResidualProblem,
-    lane: "Lane",
+    lane: Lane,
     solver: optx.AbstractGaussNewton,
     jac: Literal["fwd", "bwd"],
     max_steps: int,
