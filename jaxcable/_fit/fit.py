@@ -189,6 +189,19 @@ def _rmse(
     return rmse_mm, rmse_n, 100 * rmse / np.where(peak > 0, peak, np.nan)
 
 
+def _residual_problem(problem: Problem, start, test_list: list):
+    """`make_problem` of `problem`'s fields from the start model `start`."""
+    return make_problem(
+        start,
+        test_list,
+        problem.fit,
+        problem.per_test,
+        problem.transform_map,
+        problem.drive,
+        problem.covariate,
+    )
+
+
 def fit(
     problem: Problem,
     method: LeastSquares | StreamingLeastSquares = LeastSquares(),
@@ -323,15 +336,7 @@ def fit(
     test_list = list(problem.tests)
 
     def attempt(start):
-        residual_problem, u_user = make_problem(
-            start,
-            test_list,
-            problem.fit,
-            problem.per_test,
-            problem.transform_map,
-            problem.drive,
-            problem.covariate,
-        )
+        residual_problem, u_user = _residual_problem(problem, start, test_list)
         p = residual_problem.layout.size
         n = require_enough_samples(residual_problem.data, p)
         jac = "fwd" if p <= n else "bwd"
@@ -372,15 +377,7 @@ def _fit_streaming(
     test_list = list(problem.tests)
 
     def attempt(start):
-        residual_problem, u_user = make_problem(
-            start,
-            test_list,
-            problem.fit,
-            (),
-            problem.transform_map,
-            problem.drive,
-            problem.covariate,
-        )
+        residual_problem, u_user = _residual_problem(problem, start, test_list)
         if residual_problem.data.by_elongation.size:
             raise ValueError(
                 "`problem.tests`: jaxcable.StreamingLeastSquares fits force-driven "

@@ -136,6 +136,16 @@ def with_jacobian_jvp(
     return wrapped
 
 
+# A finished solve: `(u, result, steps, residuals, jacobian)`.
+Solved = tuple[
+    Float[Array, " p"],
+    optx.RESULTS,
+    Int[Array, ""],
+    Float[Array, " residuals"],
+    Float[Array, "residuals p"],
+]
+
+
 def _residual_fn(problem: ResidualProblem, jac: Literal["fwd", "bwd"]):
     """fn(u, args) -> (scaled residuals, None) for the solver, and the scale."""
     data = problem.data
@@ -209,13 +219,7 @@ def lane_finish(
     solver: optx.AbstractGaussNewton,
     jac: Literal["fwd", "bwd"],
     max_steps: int,
-) -> tuple[
-    Float[Array, " p"],
-    optx.RESULTS,
-    Int[Array, ""],
-    Float[Array, " residuals"],
-    Float[Array, "residuals p"],
-]:
+) -> Solved:
     """The end of a solve: `(u, result, steps, residuals, jacobian)`, the solution,
     the solver's result (`nonlinear_max_steps_reached` where it ran out of steps),
     its steps, and the flat residuals (m) and their Jacobian in u at the solution,
@@ -248,7 +252,7 @@ def finish_at(
     solver: optx.AbstractGaussNewton,
     jac: Literal["fwd", "bwd"],
     max_steps: int,
-):
+) -> Solved:
     """`lane_finish` of a lane whose solver state was not kept: the residuals and
     their Jacobian evaluated again at its iterate (where the state held them: the
     last accepted point is the iterate; before any step, zeros, as the state's)."""
@@ -274,13 +278,7 @@ def solve(
     solver: optx.AbstractGaussNewton,
     max_steps: int,
     jac: Literal["fwd", "bwd"],
-) -> tuple[
-    Float[Array, " p"],
-    optx.RESULTS,
-    Int[Array, ""],
-    Float[Array, " residuals"],
-    Float[Array, "residuals p"],
-]:
+) -> Solved:
     """One least-squares solve from `u0` to its end (traceable; `fit_kernel` maps it
     over the starts, `benchmarks/fit.py` times it alone).
 
