@@ -52,6 +52,16 @@ class Lane(eqx.Module):
     terminate: Bool[Array, ""]
     result: optx.RESULTS
 
+    @property
+    def final_result(self) -> optx.RESULTS:
+        """The solve's result once it stopped: `nonlinear_max_steps_reached` where
+        it ran out of steps (optimistix's `iterative_solve`)."""
+        return optx.RESULTS.where(
+            (self.result == optx.RESULTS.successful) & ~self.terminate,
+            optx.RESULTS.nonlinear_max_steps_reached,
+            self.result,
+        )
+
     def running(self, max_steps: int) -> Bool[Array, ""]:
         """Whether the solve takes another step (optimistix's loop condition)."""
         going = ~self.terminate & (self.result == optx.RESULTS.successful)
@@ -227,11 +237,7 @@ def lane_finish(
     fn, scale = _residual_fn(problem, jac)
     _, static = _solver_state(fn, solver, lane.y)
     state = eqx.combine(lane.state, static)
-    result = optx.RESULTS.where(
-        (lane.result == optx.RESULTS.successful) & ~lane.terminate,
-        optx.RESULTS.nonlinear_max_steps_reached,
-        lane.result,
-    )
+    result = lane.final_result
     y, _, _ = solver.postprocess(fn, lane.y, None, None, {}, state, frozenset(), result)
     # A Gauss-Newton-type solver's state holds the residuals and the linearised
     # residual function at the returned (last accepted) point; with the rule of
@@ -247,20 +253,12 @@ def lane_finish(
 
 
 def finish_at(
-    problem: ResidualProblem,
-    lane: Lane,
-    solver: optx.AbstractGaussNewton,
-    jac: Literal["fwd", "bwd"],
-    max_steps: int,
+    problem: ResidualProblem, lane: Lane, jac: Literal["fwd", "bwd"]
 ) -> Solved:
     """`lane_finish` of a lane whose solver state was not kept: the residuals and
     their Jacobian evaluated again at its iterate (where the state held them: the
     last accepted point is the iterate; before any step, zeros, as the state's)."""
-    result = optx.RESULTS.where(
-        (lane.result == optx.RESULTS.successful) & ~lane.terminate,
-        optx.RESULTS.nonlinear_max_steps_reached,
-        lane.result,
-    )
+    result = lane.final_result
     r, jacobian = residuals_and_jacobian(problem, lane.y, jac)
     stepped = lane.num_steps > 0
     return (

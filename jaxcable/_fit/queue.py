@@ -135,11 +135,9 @@ def each_kernel(
     queue = _Queue(first, jax.vmap(init)(first), store, jnp.asarray(width))
     queue = jax.lax.while_loop(lambda q: jnp.any(q.job >= 0), step, queue)
 
-    solved = jax.vmap(
-        lambda j, lane: finish_at(
-            _at(problem, data, j // n), lane, solver, jac, max_steps
-        )
-    )(jnp.arange(jobs), queue.store)
+    solved = jax.vmap(lambda j, lane: finish_at(_at(problem, data, j // n), lane, jac))(
+        jnp.arange(jobs), queue.store
+    )
     solved = jtu.tree_map(
         lambda x: jnp.reshape(x, (specimens, n) + x.shape[1:]), solved
     )
