@@ -73,6 +73,16 @@ COMPLIANCE = 2e-5
 BEDDED_IN = (1, 4, 6)
 STUCK_CABLE = 2
 RECOVERY_S = 300.0
+# What the robot's estimator learns (`--estimated terminations`): the moduli and
+# times of the integrated model that a robot's fixes identify, and the compliance of
+# the terminations (splices, the drum), which no compensation model has: its prior
+# median 1e-5 m/N, half the real one, a factor e either way.
+LEARNT = ("E1c", "E1r", "E3r", "t_e", "E2r", "t_r1", "E2c")
+TERMINATIONS = dict(
+    model=jc.TerminationCompliance(cdpr.NOMINAL, 1e-5),
+    parameters=tuple(f"base.{name}" for name in LEARNT) + ("compliance",),
+    prior_std=(RELATIVE_STD,) * len(LEARNT) + (1.0,),
+)
 
 
 def _parse():
@@ -89,6 +99,18 @@ def _parse():
         type=float,
         default=None,
         help="the estimator's random walk of the logs, 1/sqrt(s) (default: its own)",
+    )
+    p.add_argument(
+        "--estimated",
+        choices=("terminations", "default"),
+        default="terminations",
+        help="the estimated parameters: TERMINATIONS, or the estimator's defaults",
+    )
+    p.add_argument(
+        "--cause-draws",
+        type=int,
+        default=6,
+        help="draws of the coverage by load-cell error (exact, noise, drift, both)",
     )
     p.add_argument("--step-samples", type=int, default=600)
     p.add_argument("--repeats", type=int, default=300)
@@ -168,6 +190,26 @@ def _recovery(t, code, start, end, successful) -> dict:
     )
 
 
+def _settling(t, error, start, end, span=60.0) -> dict:
+    """The position error around an event: the RMS over the 10 minutes before it,
+    the largest RMS over `span` seconds after it ends, and how long after its end
+    the `span`-second RMS first falls back below 1.5 times the one before (s)."""
+    norm = np.linalg.norm(np.asarray(error), axis=-1)
+    before = np.sqrt(np.mean(norm[(t >= start - 600.0) & (t < start)] ** 2))
+    ends = t[(t >= end) & (t <= end + 1800.0)]
+    moving = np.array(
+        [np.sqrt(np.mean(norm[(t >= e) & (t < e + span)] ** 2)) for e in ends]
+    )
+    back = np.nonzero(moving <= 1.5 * before)[0]
+    return dict(
+        rms_before_mm=1e3 * float(before),
+        rms_after_max_mm=1e3 * float(moving[: int(300 / max(t[1] - t[0], 1e-9))].max())
+        if moving.size
+        else None,
+        settled_after_s=float(ends[back[0]] - end) if back.size else None,
+    )
+
+
 def _code(result) -> np.ndarray:
     return np.asarray(result._value)  # noqa: SLF001
 
@@ -196,7 +238,7 @@ def _run_draw(draw, key, scenario, estimator, hours, no_fix: bool) -> dict:
     truth = _truth(estimator, real)
     low, high = (np.asarray(a) for a in state.interval())
     std = np.asarray(state.std)
-    identified = std < 0.5 * estimator.prior_std
+    identified = std < 0.5 * np.sqrt(np.asarray(estimator.prior_variance))[None, :]
     covers = (truth >= low) & (truth <= high)
     code = _code(online.result)
     ok = int(jc.RESULTS.successful._value)  # noqa: SLF001
@@ -226,8 +268,11 @@ def _run_draw(draw, key, scenario, estimator, hours, no_fix: bool) -> dict:
         covered=int((covers & identified).sum()),
         diverged=bool(np.any(code == diverged)),
         final_result=str(state.result) or "successful",
-        dropout=_recovery(t, code, dropout[0] + 61.0, sum(dropout), ok),
-        stuck=_recovery(t, code, stuck[1] + 31.0, stuck[1] + stuck[2], ok),
+        dropout=_recovery(t, code, dropout[0] + 61.0, sum(dropout), ok)
+        | _settling(t, online.run.error, dropout[0], sum(dropout)),
+        stuck=_recovery(t, code, stuck[1] + 31.0, stuck[1] + stuck[2], ok)
+        | _settling(t, online.run.error, stuck[1], stuck[1] + stuck[2]),
+        reduced_chi2=float(state.reduced_chi2),
         loop_seconds=loop_seconds,
     )
     if no_fix:
@@ -284,8 +329,74 @@ def _step_us(estimator, scenario, samples: int, repeats: int) -> dict:
         call_us=1e6 * statistics.median(per_call),
         call_p90_us=1e6 * float(np.percentile(per_call, 90)),
         samples=samples,
-        dtype=str(state0.strain.dtype),
+        dtype=str(state0.log_parameters.dtype),
     )
+
+
+def _solve_ms(estimator, hours: float = 1.0) -> dict:
+    """One step that runs the horizon's solve, after `hours` of samples (the
+    window then holds them all): ms, the median of 3 jitted calls on the same
+    state."""
+    scenario = cdpr.pick_and_place(hours=hours)
+    real = cdpr.real_cables(jax.random.key(97), relative_std=RELATIVE_STD)
+    sensors = real_sensors(jax.random.key(96), scenario, ROBOT.num_cables)
+    sensors = jax.tree.map(lambda a: a[:-1], sensors)
+    run = cdpr.simulate_online(estimator, scenario[:-1], real, sensors)
+    state = run.state
+    step = jax.jit(lambda s, *args: estimator.step(s, *args))
+    lengths = ROBOT.free_lengths(scenario.position[-1])
+    args = (scenario.time[-1], run.run.forces[-1], lengths, cdpr.Fix.missing(lengths))
+    jax.block_until_ready(step(state, *args))
+    times = []
+    for _ in range(3):
+        t0 = time.perf_counter()
+        jax.block_until_ready(step(state, *args))
+        times.append(time.perf_counter() - t0)
+    return dict(
+        ms=1e3 * statistics.median(times),
+        window_samples=int(state.window.count),
+        due=bool(state.window.since >= estimator.every),
+        passes=estimator.iterations + 2,
+    )
+
+
+def _coverage_by_cause(estimator, scenario, draws: int) -> dict:
+    """The share of identified parameters covered by their 95 % intervals at the
+    end of the run, by the load cells' errors (no dropout, no stuck cell): exact,
+    0.5 N of noise, the drift, both."""
+    causes = dict(
+        exact=dict(force_noise=0.0, force_drift=0.0),
+        noise=dict(force_drift=0.0),
+        drift=dict(force_noise=0.0),
+        both={},
+    )
+    out = {}
+    for name, options in causes.items():
+        covered = identified = 0
+        for d in range(draws):
+            k_real, k_sensors = jax.random.split(jax.random.key(1000 + d))
+            real = cdpr.real_cables(
+                k_real,
+                relative_std=RELATIVE_STD,
+                compliance=COMPLIANCE,
+                bedded_in=BEDDED_IN,
+            )
+            sensors = real_sensors(k_sensors, scenario, ROBOT.num_cables, **options)
+            state = cdpr.simulate_online(estimator, scenario, real, sensors).state
+            truth = _truth(estimator, real)
+            low, high = (np.asarray(a) for a in state.interval())
+            prior = np.sqrt(np.asarray(estimator.prior_variance))[None, :]
+            ident = np.asarray(state.std) < 0.5 * prior
+            identified += int(ident.sum())
+            covered += int((ident & (truth >= low) & (truth <= high)).sum())
+        out[name] = dict(
+            draws=draws,
+            identified=identified,
+            covered=covered,
+            share=covered / identified if identified else None,
+        )
+        print(f"coverage, load cells {name}: {out[name]}", file=sys.stderr, flush=True)
+    return out
 
 
 def _day_log(samples: int) -> dict:
@@ -349,6 +460,8 @@ def main():
     args = _parse()
     scenario = cdpr.pick_and_place(hours=args.hours)
     options = {} if args.drift is None else dict(drift=args.drift)
+    if args.estimated == "terminations":
+        options |= TERMINATIONS
     estimator = cdpr.OnlineEstimator(ROBOT, **options)
     no_fix_draws = args.draws if args.no_fix_draws is None else args.no_fix_draws
     keys = jax.random.split(jax.random.key(args.seed), args.draws)
@@ -368,6 +481,8 @@ def main():
     loops = [r["loop_seconds"] for r in rows[1:]] or [rows[0]["loop_seconds"]]
     loop_seconds = statistics.median(loops) * 2.0 / args.hours
     step = _step_us(estimator, scenario, args.step_samples, args.repeats)
+    step["solve"] = _solve_ms(estimator)
+    causes = _coverage_by_cause(estimator, scenario, args.cause_draws)
     day = _day_log(args.day_samples)
     no_fix = [r for r in rows if "rms_no_fix_mm" in r]
     out = dict(
@@ -382,6 +497,7 @@ def main():
             median_s=statistics.median(loops),
             scaled_to_2h_s=loop_seconds,
         ),
+        coverage_by_load_cell_error=causes,
         no_fix=dict(
             draws=len(no_fix),
             rms_no_fix_mm=[r["rms_no_fix_mm"] for r in no_fix],
@@ -401,9 +517,13 @@ def main():
             events=dict(zip(("dropout", "stuck"), _events(args.hours))),
             estimator=dict(
                 parameters=list(estimator.parameters),
+                model=type(estimator.model).__name__,
                 prior_std=estimator.prior_std,
                 drift=estimator.drift,
                 fix_noise=estimator.fix_noise,
+                window=estimator.window,
+                every=estimator.every,
+                iterations=estimator.iterations,
             ),
             oracle="the real cables' model and true parameters (termination "
             "compliance included) predicting from the load cells' readings",
