@@ -9,9 +9,10 @@ Every function is pure JAX: a whole run (hours of pick-and-place) is one jitted
 - `scenario`: the pick-and-place task and the "real" cables;
 - `run`: the closed loop and the comparison of compensation models;
 - `tuning`: derivatives through the closed loop and gain tuning;
-- `estimator`, `signals`, `online`: a robot that calibrates its own cables (an
-    online estimator of each cable's parameters beside the controller, what it
-    measures, and the closed loop it compensates).
+- `estimator`, `horizon`, `signals`, `online`: a robot that calibrates its own
+    cables (an online estimator of each cable's parameters beside the controller,
+    its moving-horizon re-linearisation, what it measures, and the closed loop it
+    compensates).
 """
 
 from .estimator import (

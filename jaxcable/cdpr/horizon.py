@@ -166,7 +166,7 @@ def tangent_step(estimator, theta, track: Track, time, forces, lengths):
     sensitivities carried forward (`jax.linearize`, one tangent per parameter).
 
     **Returns:** `(new_state, track, elongation)`: the model's new
-    `ControllerState` (its result included), the new [`Track`][] and the elongations,
+    `ControllerState` (its result included), the new `Track` and the elongations,
     m, `(n,)`.
     """
     n, p = theta.shape
