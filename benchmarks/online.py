@@ -89,6 +89,7 @@ RECOVERY_S = 300.0
 # times of the integrated model that a robot's fixes identify, and the compliance of
 # the terminations (splices, the drum), which no compensation model has: its prior
 # median 1e-5 m/N, half the real one, a factor e either way.
+DRIFT_PRIOR = 2.0  # N/h: twice the drift rates' standard deviation
 LEARNT = ("E1c", "E1r", "E3r", "t_e", "E2r", "t_r1", "E2c")
 TERMINATIONS = dict(
     model=jc.TerminationCompliance(cdpr.NOMINAL, jnp.asarray(1e-5)),
@@ -114,9 +115,10 @@ def _parse():
     )
     p.add_argument(
         "--estimated",
-        choices=("terminations", "default"),
+        choices=("terminations", "drift", "default"),
         default="terminations",
-        help="the estimated parameters: TERMINATIONS, or the estimator's defaults",
+        help="the estimated parameters: TERMINATIONS, with the load cells' drift "
+        "too, or the estimator's defaults",
     )
     p.add_argument(
         "--cause-draws",
@@ -177,12 +179,17 @@ def _rms_mm(error, mask) -> float:
     return 1e3 * float(np.sqrt(np.mean(np.sum(np.asarray(error)[mask] ** 2, axis=-1))))
 
 
-def _truth(estimator, real) -> np.ndarray:
+def _truth(estimator, real, scenario, sensors) -> np.ndarray:
     """The real cables' values of the estimated parameters, `(n, p)`: a name of the
     integrated model is looked up in the real cables' base model, a dotted one
-    (`base.E1c`, `compliance`) in the real cables' wrapped model."""
+    (`base.E1c`, `compliance`) in the real cables' wrapped model; a load cell's drift
+    rate (N/h) is the slope of its errors."""
     values = []
     for name in estimator.parameters:
+        if name == "load_cell_drift":
+            t, error = np.asarray(scenario.time), np.asarray(sensors.force_error)
+            values.append(3600.0 * np.polyfit(t, error, 1)[0])
+            continue
         owner = real if "." in name or name == "compliance" else real.base
         values.append(np.asarray(functools.reduce(getattr, name.split("."), owner)))
     return np.stack(values, axis=1)
@@ -247,7 +254,7 @@ def _run_draw(draw, key, scenario, estimator, hours, no_fix: bool) -> dict:
     nominal = cdpr.simulate_robot(ROBOT, scenario, real, cdpr.NOMINAL)
     oracle = _oracle(ROBOT, scenario, real, sensors)
     state = online.state
-    truth = _truth(estimator, real)
+    truth = _truth(estimator, real, scenario, sensors)
     low, high = (np.asarray(a) for a in state.interval())
     std = np.asarray(state.std)
     identified = std < 0.5 * np.sqrt(np.asarray(estimator.prior_variance))[None, :]
@@ -395,7 +402,7 @@ def _coverage_by_cause(estimator, scenario, draws: int) -> dict:
             )
             sensors = real_sensors(k_sensors, scenario, ROBOT.num_cables, **options)
             state = cdpr.simulate_online(estimator, scenario, real, sensors).state
-            truth = _truth(estimator, real)
+            truth = _truth(estimator, real, scenario, sensors)
             low, high = (np.asarray(a) for a in state.interval())
             prior = np.sqrt(np.asarray(estimator.prior_variance))[None, :]
             ident = np.asarray(state.std) < 0.5 * prior
@@ -472,8 +479,11 @@ def main():
     args = _parse()
     scenario = cdpr.pick_and_place(hours=args.hours)
     options = {} if args.drift is None else dict(drift=args.drift)
-    if args.estimated == "terminations":
+    if args.estimated in ("terminations", "drift"):
         options |= TERMINATIONS
+    if args.estimated == "drift":
+        options["parameters"] += ("load_cell_drift",)
+        options["prior_std"] += (DRIFT_PRIOR,)
     estimator = cdpr.OnlineEstimator(ROBOT, **options)
     no_fix_draws = args.draws if args.no_fix_draws is None else args.no_fix_draws
     keys = jax.random.split(jax.random.key(args.seed), args.draws)

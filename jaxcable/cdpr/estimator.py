@@ -99,6 +99,9 @@ from .signals import Fix
 
 
 DEFAULT_PARAMETERS = ("E1c", "E1r", "E3r", "t_e")
+# Not a field of the model: each load cell's drift rate, N/h, from zero at the
+# estimator's start (its readings less rate * elapsed time reach the model).
+LOAD_CELL_DRIFT = "load_cell_drift"
 # The two-sided 95 % quantile of a normal distribution.
 _Z95 = 1.959963984540054
 
@@ -138,6 +141,8 @@ class EstimatorState(eqx.Module):
     - `rejected`: fixes in a row beyond the gate.
     - `result`: a [`jaxcable.RESULTS`][] (`successful`, `signal_lost` or
         `estimator_diverged`).
+    - `origin`: the start's time, s (a load cell's estimated drift is zero there).
+    - `additive` (static): which columns are not logs (a load cell's drift, N/h).
     """
 
     log_parameters: Float[Array, "n p"]
@@ -156,6 +161,8 @@ class EstimatorState(eqx.Module):
     nis: Float[Array, ""]
     rejected: Float[Array, ""]
     result: RESULTS
+    origin: Float[Array, ""]
+    additive: tuple[bool, ...] = eqx.field(static=True, default=())
 
     @property
     def std(self) -> Float[Array, "n p"]:
@@ -165,8 +172,13 @@ class EstimatorState(eqx.Module):
 
     @property
     def parameters(self) -> Float[Array, "n p"]:
-        """The estimates (the medians of their log-normal marginals), SI."""
-        return jnp.exp(self.log_parameters)
+        """The estimates (the medians of their log-normal marginals; a load cell's
+        drift as it is, N/h), SI."""
+        return self._natural(self.log_parameters)
+
+    def _natural(self, x):
+        additive = jnp.asarray(self.additive or (False,) * x.shape[-1])
+        return jnp.where(additive, x, jnp.exp(x))
 
     def interval(self, z: float = _Z95) -> tuple[Float[Array, "n p"], ...]:
         """Each estimate's interval exp(log estimate -/+ z std) (default 95 %).
@@ -180,7 +192,10 @@ class EstimatorState(eqx.Module):
         `(low, high)`, SI, each `(n, p)`.
         """
         s = z * self.std
-        return jnp.exp(self.log_parameters - s), jnp.exp(self.log_parameters + s)
+        return (
+            self._natural(self.log_parameters - s),
+            self._natural(self.log_parameters + s),
+        )
 
     @property
     def diverged(self) -> Array:
@@ -200,7 +215,9 @@ class OnlineEstimator(eqx.Module):
         [`jaxcable.cdpr.NOMINAL`][]): the start of the estimates, the values of
         the parameters not estimated and the fallback.
     - `parameters`: the names of the estimated scalar fields (default E1c, E1r,
-        E3r, t_e), dotted for a wrapped model (`"base.E2r"`).
+        E3r, t_e), dotted for a wrapped model (`"base.E2r"`), and
+        `"load_cell_drift"`: each load cell's drift rate, N/h, from zero at the start
+        (estimated as it is, not as a log; its `prior_std` in N/h).
     - `prior_std`: the standard deviation of the start's logs (0.3: 30 %), one
         for all parameters or one per parameter (a tuple).
     - `drift`: the random walk of the logs, 1/sqrt(s) (0: constant cables).
@@ -241,6 +258,8 @@ class OnlineEstimator(eqx.Module):
         if len(self.parameters) == 0:
             raise ValueError("`parameters` must name at least one field.")
         for name in self.parameters:
+            if name == LOAD_CELL_DRIFT:
+                continue
             try:
                 leaf = _getter(name)(self.model)
             except AttributeError:
@@ -302,13 +321,34 @@ class OnlineEstimator(eqx.Module):
             lambda x: jnp.broadcast_to(x, (n, *jnp.shape(x))) if eqx.is_array(x) else x,
             self.model,
         )
-        getters = [_getter(name) for name in self.parameters]
-        values = tuple(jnp.exp(theta[:, j]) for j in range(len(getters)))
-        return eqx.tree_at(lambda m: tuple(g(m) for g in getters), model, values)
+        fields = [
+            (j, _getter(name))
+            for j, name in enumerate(self.parameters)
+            if name != LOAD_CELL_DRIFT
+        ]
+        values = tuple(jnp.exp(theta[:, j]) for j, _ in fields)
+        return eqx.tree_at(lambda m: tuple(g(m) for _, g in fields), model, values)
+
+    @property
+    def additive(self) -> tuple[bool, ...]:
+        """Which estimated quantities are not logs (the load cells' drift)."""
+        return tuple(name == LOAD_CELL_DRIFT for name in self.parameters)
+
+    def forces(self, theta, time, origin, forces):
+        """The load cells' readings less their estimated drift, N, `(n,)`."""
+        if LOAD_CELL_DRIFT not in self.parameters:
+            return forces
+        rate = theta[:, self.parameters.index(LOAD_CELL_DRIFT)]
+        return forces - rate * (time - origin) / 3600.0
 
     def _nominal_log(self, n: int, dtype) -> Float[Array, "n p"]:
         logs = jnp.stack(
-            [jnp.log(_getter(name)(self.model)) for name in self.parameters]
+            [
+                jnp.zeros(())
+                if name == LOAD_CELL_DRIFT
+                else jnp.log(_getter(name)(self.model))
+                for name in self.parameters
+            ]
         )
         return jnp.broadcast_to(logs.astype(dtype), (n, len(self.parameters)))
 
@@ -368,6 +408,8 @@ class OnlineEstimator(eqx.Module):
             nis=zero,
             rejected=zero,
             result=RESULTS.successful,
+            origin=time,
+            additive=self.additive,
         )
 
     def step(
@@ -494,7 +536,13 @@ class OnlineEstimator(eqx.Module):
         # fixes prefer: the filter wanders between solves, and the anchor's states
         # are first order in the parameters; but early on it may be ahead.
         theta, covariance, chi2, track, window, anchor = solve(
-            self, state.window, state.anchor, state.solution, state.log_parameters, due
+            self,
+            state.window,
+            state.anchor,
+            state.solution,
+            state.log_parameters,
+            due,
+            state.origin,
         )
         finite = jnp.all(jnp.isfinite(theta)) & jnp.all(jnp.isfinite(covariance))
         finite = finite & jnp.all(jnp.isfinite(track.strain))
@@ -519,7 +567,7 @@ class OnlineEstimator(eqx.Module):
         """The model's step at the estimates, with the sensitivities' tangents, and
         the nominal model's step (the fallback)."""
         new, track, elongation = tangent_step(
-            self, state.log_parameters, state.track, time, forces, lengths
+            self, state.log_parameters, state.track, time, forces, lengths, state.origin
         )
         cables = self.robot.cables(lengths)
         nominal, fallback = controller_step(

@@ -161,7 +161,7 @@ def fix_residual(robot: Robot, strain, strain_sensitivity, fix: Fix):
     return fix.position - x_pred, H
 
 
-def tangent_step(estimator, theta, track: Track, time, forces, lengths):
+def tangent_step(estimator, theta, track: Track, time, forces, lengths, origin):
     """One step of the cables' model at the log-parameters `theta` with the
     sensitivities carried forward (`jax.linearize`, one tangent per parameter).
 
@@ -175,9 +175,11 @@ def tangent_step(estimator, theta, track: Track, time, forces, lengths):
 
     def run(theta, packed):
         state = eqx.tree_at(lambda m: m.packed, template, packed)
-        new, elongation = controller_step(
-            estimator.models(theta), cables, state, time, forces, throw=False
+        model, load = (
+            estimator.models(theta),
+            estimator.forces(theta, time, origin, forces),
         )
+        new, elongation = controller_step(model, cables, state, time, load, throw=False)
         return (new.packed, elongation), new
 
     (_, elongation), linear, new = jax.linearize(
@@ -191,7 +193,7 @@ def tangent_step(estimator, theta, track: Track, time, forces, lengths):
     return new, track, elongation
 
 
-def _pass(estimator, window: Window, anchor: Anchor, theta, fold, active):
+def _pass(estimator, window: Window, anchor: Anchor, theta, fold, active, origin):
     """Re-simulate the window at `theta` from the anchor: the normal equations of
     its fixes, the track after it, and the track and normal equations after its
     first `fold` samples."""
@@ -216,7 +218,9 @@ def _pass(estimator, window: Window, anchor: Anchor, theta, fold, active):
         A = A + w * (H.T @ H)
         b = b + w * (H.T @ r)
         chi2 = chi2 + jnp.stack([w * (r @ r), jnp.where(fix.valid, 3.0, 0.0)])
-        _, track, _ = tangent_step(estimator, theta, track, time, forces, lengths)
+        _, track, _ = tangent_step(
+            estimator, theta, track, time, forces, lengths, origin
+        )
         return track, A, b, chi2, kept
 
     kept = (track, *zeros)
@@ -241,8 +245,10 @@ class _Point(eqx.Module):
     objective: Float[Array, ""]
 
 
-def _point(estimator, window, anchor, theta, fold, active) -> _Point:
-    track, A, b, chi2, kept = _pass(estimator, window, anchor, theta, fold, active)
+def _point(estimator, window, anchor, theta, fold, active, origin) -> _Point:
+    track, A, b, chi2, kept = _pass(
+        estimator, window, anchor, theta, fold, active, origin
+    )
     x = theta.reshape(-1)
     # The negative log-posterior, up to a constant: the fixes' chi-square and the
     # arrival cost's quadratic form.
@@ -251,7 +257,15 @@ def _point(estimator, window, anchor, theta, fold, active) -> _Point:
     return _Point(theta, track, A, b, chi2, kept, objective)
 
 
-def solve(estimator, window: Window, anchor: Anchor, theta, other=None, active=True):
+def solve(
+    estimator,
+    window: Window,
+    anchor: Anchor,
+    theta,
+    other=None,
+    active=True,
+    origin: float | Array = 0.0,
+):
     """The horizon's maximum a-posteriori solve from `theta` `(n, p)` (or from
     `other` where its posterior is higher): a Levenberg-Marquardt iteration on the
     window's Gauss-Newton normal equations (its passes empty where `active` is
@@ -267,13 +281,13 @@ def solve(estimator, window: Window, anchor: Anchor, theta, other=None, active=T
     solution, its covariance (the inverse Gauss-Newton Hessian there), the fixes'
     reduced chi-square, the track after the window at the solution, and the window
     and anchor after folding the samples that the next `every` samples will push
-    out.
+    out. `origin` is the estimator's start (s), where a load cell's drift is zero.
     """
     n, p = theta.shape
     fold = jnp.maximum(window.count + estimator.every - window.size, 0)
-    start = _point(estimator, window, anchor, theta, fold, active)
+    start = _point(estimator, window, anchor, theta, fold, active, origin)
     if other is not None:
-        alternative = _point(estimator, window, anchor, other, fold, active)
+        alternative = _point(estimator, window, anchor, other, fold, active, origin)
         better = alternative.objective < start.objective
         start = jax.tree.map(lambda a, b: jnp.where(better, a, b), alternative, start)
 
@@ -283,7 +297,7 @@ def solve(estimator, window: Window, anchor: Anchor, theta, other=None, active=T
         rhs = anchor.shift + best.b - anchor.information @ best.theta.reshape(-1)
         scale = jnp.diag(jnp.diagonal(information))
         step = jnp.linalg.solve(information + damping * scale, rhs).reshape(n, p)
-        new = _point(estimator, window, anchor, best.theta + step, fold, active)
+        new = _point(estimator, window, anchor, best.theta + step, fold, active, origin)
         better = new.objective < best.objective
         best = jax.tree.map(lambda a, b: jnp.where(better, a, b), new, best)
         damping = jnp.where(better, damping / 3.0, damping * 4.0)
