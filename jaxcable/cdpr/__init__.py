@@ -9,7 +9,7 @@ Every function is pure JAX: a whole run (hours of pick-and-place) is one jitted
 - `scenario`: the pick-and-place task and the "real" cables;
 - `run`: the closed loop and the comparison of compensation models;
 - `tuning`: derivatives through the closed loop and gain tuning;
-- `estimator`, `horizon`, `signals`, `online`: a robot that calibrates its own
+- `estimator`, `state`, `horizon`, `signals`, `online`: a robot that calibrates its own
     cables (an online estimator of each cable's parameters beside the controller,
     its moving-horizon re-linearisation, what it measures, and the closed loop it
     compensates).
@@ -17,9 +17,7 @@ Every function is pure JAX: a whole run (hours of pick-and-place) is one jitted
 
 from .estimator import (
     DEFAULT_PARAMETERS as DEFAULT_PARAMETERS,
-    EstimatorState as EstimatorState,
     OnlineEstimator as OnlineEstimator,
-    interval_covers as interval_covers,
 )
 from .online import (
     OnlineRun as OnlineRun,
@@ -56,6 +54,10 @@ from .scenario import (
     real_sensors as real_sensors,
 )
 from .signals import Fix as Fix, fix_prediction as fix_prediction
+from .state import (
+    EstimatorState as EstimatorState,
+    interval_covers as interval_covers,
+)
 from .tuning import (
     GainTuning as GainTuning,
     errors_and_jacobian as errors_and_jacobian,

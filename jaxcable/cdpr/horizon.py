@@ -152,13 +152,18 @@ class Anchor(eqx.Module):
 def fix_residual(robot: Robot, strain, strain_sensitivity, fix: Fix):
     """A fix's residual against the position the predicted strains imply, and its
     Jacobian in the log-parameters, `(3,)` and `(3, n p)` (cable-major)."""
-    n = strain.shape[0]
     lengths = fix.lengths
     x_pred, dx_de = fix_prediction(robot, lengths, strain * lengths, fix.position)
     de = (strain_sensitivity * lengths).T
     H = (dx_de[:, :, None] * de[None, :, :]).reshape(3, -1)
-    del n
     return fix.position - x_pred, H
+
+
+def unit_directions(n: int, p: int, dtype) -> Float[Array, "p n p"]:
+    """The tangents of the log-parameters, one per parameter: tangent j moves
+    parameter j of every cable at once (the cables are independent, so cable i's
+    tangent is its derivative in its own parameter j)."""
+    return jnp.broadcast_to(jnp.eye(p, dtype=dtype)[:, None, :], (p, n, p))
 
 
 def tangent_step(estimator, theta, track: Track, time, forces, lengths, origin):
@@ -185,9 +190,7 @@ def tangent_step(estimator, theta, track: Track, time, forces, lengths, origin):
     (_, elongation), linear, new = jax.linearize(
         run, theta, template.packed, has_aux=True
     )
-    directions = jnp.broadcast_to(
-        jnp.eye(p, dtype=elongation.dtype)[:, None, :], (p, n, p)
-    )
+    directions = unit_directions(n, p, elongation.dtype)
     sensitivity, d_elongation = jax.vmap(linear)(directions, track.sensitivity)
     track = Track(new, sensitivity, elongation / lengths, d_elongation / lengths)
     return new, track, elongation
