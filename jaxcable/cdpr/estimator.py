@@ -41,14 +41,10 @@ nominal model's values. E1r is identified only where it exceeds E1c (a rope with
 constructional elongation, Park Eq. 9): otherwise the loading curve is the strain
 and E1r does not enter it, and its interval stays the prior's (reported as not
 identified, not as tight). The default set's E1c and E1r differ by 0.1 %, on the
-kink of that maximum: a cable drawn across it is learnt more slowly, and the posterior
-there is kinked (the horizon solve's damping is for it). A robot whose cables were not
-calibrated learns more (`benchmarks/online.py`: E2r, t_r1 and E2c too, and the
-terminations' compliance through [`jaxcable.TerminationCompliance`][]): over two hours
-the horizon solve identifies some of them, and the others keep wide intervals. Any
-scalar field of the model can be chosen (`parameters`, dotted for a wrapped model:
-`"base.E2r"`, `"compliance"`), and `"load_cell_drift"` adds each load cell's drift
-rate.
+kink of that maximum: a cable drawn across it is learnt more slowly. Any scalar field
+of the model can be chosen (`parameters`, dotted for a wrapped model: `"base.E2r"`,
+the terminations' `"compliance"`; `benchmarks/online.py` learns seven and the
+compliance), and `"load_cell_drift"` adds each load cell's drift rate.
 
 **Measurements.** A position fix ([`jaxcable.cdpr.Fix`][]) is compared with the
 position that the encoders' lengths plus the predicted elongations imply
