@@ -195,6 +195,13 @@ def _truth(estimator, real, scenario, sensors) -> np.ndarray:
     return np.stack(values, axis=1)
 
 
+def _identified(estimator, state) -> np.ndarray:
+    """The parameters the data identify: a posterior standard deviation below half
+    the prior's, `(n, p)` booleans."""
+    prior = np.sqrt(np.asarray(estimator.prior_variance))[None, :]
+    return np.asarray(state.std) < 0.5 * prior
+
+
 def _recovery(t, code, start, end, successful) -> dict:
     """Whether `signal_lost` was reported in [start + grace, end) and how long after
     `end` the estimator was successful again (s; None if never)."""
@@ -257,8 +264,8 @@ def _run_draw(draw, key, scenario, estimator, hours, no_fix: bool) -> dict:
     truth = _truth(estimator, real, scenario, sensors)
     low, high = (np.asarray(a) for a in state.interval())
     std = np.asarray(state.std)
-    identified = std < 0.5 * np.sqrt(np.asarray(estimator.prior_variance))[None, :]
-    covers = (truth >= low) & (truth <= high)
+    identified = _identified(estimator, state)
+    covers = np.asarray(cdpr.interval_covers(state, truth))
     code = _code(online.result)
     ok = int(jc.RESULTS.successful._value)  # noqa: SLF001
     diverged = int(jc.RESULTS.estimator_diverged._value)  # noqa: SLF001
@@ -403,11 +410,10 @@ def _coverage_by_cause(estimator, scenario, draws: int) -> dict:
             sensors = real_sensors(k_sensors, scenario, ROBOT.num_cables, **options)
             state = cdpr.simulate_online(estimator, scenario, real, sensors).state
             truth = _truth(estimator, real, scenario, sensors)
-            low, high = (np.asarray(a) for a in state.interval())
-            prior = np.sqrt(np.asarray(estimator.prior_variance))[None, :]
-            ident = np.asarray(state.std) < 0.5 * prior
+            ident = _identified(estimator, state)
             identified += int(ident.sum())
-            covered += int((ident & (truth >= low) & (truth <= high)).sum())
+            covers = np.asarray(cdpr.interval_covers(state, truth))
+            covered += int((ident & covers).sum())
         out[name] = dict(
             draws=draws,
             identified=identified,
